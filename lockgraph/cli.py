@@ -1,0 +1,179 @@
+"""The ``lockgraph`` command line.
+
+    lockgraph scenes
+    lockgraph run SCENE [--state early|late] [--n N] [--steps K] [--dt DT] [--seed S]
+                        [--threads T] [--lock none|grid|graph] [--scale X]
+                        [--policy exact|paper] [--param KEY=VALUE ...]
+                        [--save FILE.npz] [--json] [--quiet]
+
+Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
+could not continue (the state is left at the last completed step; nothing is saved).
+"""
+import argparse
+import json
+import resource
+import sys
+import time
+import warnings
+
+from . import __version__
+from .errors import InputError, SimulationError
+
+
+def _peak_rss_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
+
+
+class Progress:
+    """At most one line a second on stderr: steps done, collisions, rate."""
+
+    def __init__(self, enabled, label):
+        self.enabled = enabled
+        self.label = label
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+
+    def message(self, msg):
+        if self.enabled:
+            print(msg, file=sys.stderr, flush=True)
+
+    def steps(self, sim, done, total):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if done < total and now - self.last < 1.0:
+            return
+        self.last = now
+        s = sim.stats
+        rate = s["events_per_s"]
+        print(f"{self.label}: step {done}/{total}, {s['collisions']} collisions, "
+              f"{rate:.3g} collisions/s, {now - self.t0:.1f} s", file=sys.stderr, flush=True)
+
+
+def cmd_scenes(args):
+    from . import scenarios
+
+    for name in scenarios.available():
+        scene = scenarios.read(name)
+        print(f"{name:14s} {scene.description}")
+    return 0
+
+
+def cmd_run(args):
+    import numpy as np
+
+    from . import scenarios
+    from .observables import reduced_pressure
+    from .simulation import Simulation
+
+    progress = Progress(not args.quiet, args.scene)
+    params = scenarios.parse_overrides(args.param)
+    sc = scenarios.load(args.scene, state=args.state, n=args.n, seed=args.seed, dt=args.dt,
+                        params=params, progress=progress.message)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore" if args.json else "default")
+        sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=args.threads, lock=args.lock,
+                         scale=args.scale, policy=args.policy)
+    sim.run(args.steps, progress=lambda d, t: progress.steps(sim, d, t))
+    final = sim.state
+    stats = sim.stats
+    out = {
+        "scene": sc.name,
+        "state": sc.which,
+        "n": final.n,
+        "steps": args.steps,
+        "dt": sc.dt,
+        "seed": sc.params["seed"],
+        "threads": args.threads,
+        "threads_used": stats["threads_used"],
+        "lock": args.lock,
+        "scale": args.scale,
+        "policy": args.policy,
+        "collisions": stats["collisions"],
+        "pair_collisions": stats["pair_collisions"],
+        "wall_collisions": stats["wall_collisions"],
+        "wall_s": stats["wall_s"],
+        "compile_s": stats["compile_s"],
+        "events_per_s": stats["events_per_s"],
+        "max_overlap": stats["max_overlap"],
+        "violations": stats["violations"],
+        "repairs": stats["repairs"],
+        "time": final.time,
+        "state_sha256": final.sha256(),
+        "peak_rss_mb": _peak_rss_mb(),
+        "params": sc.params,
+        "stats": stats,
+    }
+    if sc.name == "gas" or sc.physics.domain.describe()["type"] == "periodic_cube":
+        out["pressure_reduced"] = reduced_pressure(final, stats)
+        eta = sc.params.get("eta")
+        if eta is not None:
+            out["pressure_carnahan_starling"] = (1 + eta + eta ** 2 - eta ** 3) / (1 - eta) ** 3
+    if args.save:
+        final.save(args.save)  # only after a successful run, atomically
+    if args.json:
+        print(json.dumps(out, default=_jsonable))
+    else:
+        for k, v in out.items():
+            if k not in ("params", "stats"):
+                print(f"{k:18s} {v}")
+        if args.save:
+            print(f"{'saved':18s} {args.save}")
+    return 0
+
+
+def _jsonable(v):
+    import numpy as np
+
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating,)):
+        return float(v)
+    raise TypeError(f"not JSON serialisable: {v!r}")
+
+
+def parser():
+    p = argparse.ArgumentParser(prog="lockgraph", description="Hard-sphere collisions in time "
+                                "order, sequential or in parallel threads under lock-graph locks.")
+    p.add_argument("--version", action="version", version=f"lockgraph {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("scenes", help="list the scenes")
+    s.set_defaults(func=cmd_scenes)
+    r = sub.add_parser("run", help="run a scene")
+    r.add_argument("scene", help="scene name (see 'lockgraph scenes') or a .toml file")
+    r.add_argument("--state", choices=("early", "late"), default="early")
+    r.add_argument("--n", type=int, help="number of particles (scene parameter n)")
+    r.add_argument("--steps", type=int, default=10)
+    r.add_argument("--dt", type=float, help="step length in s (scene parameter dt)")
+    r.add_argument("--seed", type=int, help="random seed (scene parameter seed)")
+    r.add_argument("--threads", type=int, default=1)
+    r.add_argument("--lock", default="graph", help="none | grid | graph")
+    r.add_argument("--scale", type=float, default=4.0, help="lock-graph SCALE")
+    r.add_argument("--policy", default="exact", help="exact | paper")
+    r.add_argument("--param", action="append", metavar="KEY=VALUE",
+                   help="override a scene parameter (repeatable)")
+    r.add_argument("--save", metavar="FILE.npz", help="write the final state (pos, vel, radius, "
+                   "mass, ordered by particle id)")
+    r.add_argument("--json", action="store_true", help="print one JSON object")
+    r.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    r.set_defaults(func=cmd_run)
+    return p
+
+
+def main(argv=None):
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as exc:
+        print(f"lockgraph: error: {exc}", file=sys.stderr)
+        return 2
+    except SimulationError as exc:
+        print(f"lockgraph: run stopped: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        print("lockgraph: interrupted; nothing saved", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

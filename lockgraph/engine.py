@@ -1,0 +1,319 @@
+"""One step of the collision engine (sequential), driving the numba kernels.
+
+A step of length dt:
+
+1. half kick of Hill's equations (shearing sheet only);
+2. search radii, kD-tree over the step-start positions (the *anchors*),
+   particles re-stored in tree order, candidate pairs by two-argument recursion;
+3. every particle's first event predicted; events processed strictly in
+   (time, particle id) order — advance the two particles, resolve, predict
+   both again against their candidates and walls; a particle whose velocity
+   rose past its search radius widens it and searches the tree again;
+4. everyone drifts to the step end; periodic wrap; second half kick.
+
+If a step cannot finish (an internal pool is full, inelastic collapse, a
+search radius larger than the periodic box allows) the drift phase is undone
+from the anchors and the undo journal, so the state is exactly what it was
+after the first half kick; errors then also undo that kick.
+"""
+import math
+import time as _time
+
+import numpy as np
+
+from . import kernels as K
+from .domains import DOMAIN_DISH, wrap
+from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
+from .events import tournament_size
+from .forces import kick_hill
+from .neighbors import JCOUNT, NCTR, XCOUNT, build_csr
+from .state import State
+from .tree import build, count_nodes, node_bounds, pair_search, permute_mat3, permute_vec
+
+STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
+                K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk"}
+
+
+class Engine:
+    """Sequential event-driven hard-sphere engine working on a private copy of a state.
+
+    Parameters
+    ----------
+    state : State
+    physics : Physics
+    dt : float, s — step length (> 0).
+    skin : float — extra search radius, in units of the rms speed times dt.
+    leaf_size : int — particles per kD-tree leaf.
+    collapse_limit : int — collisions of one particle within one step that are
+        taken as inelastic collapse.
+    check_overlaps : bool — measure the largest overlap among candidate pairs at
+        every step end (cheap; on by default).
+    """
+
+    def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=8, collapse_limit=10000,
+                 check_overlaps=True, chunk_events=1 << 20):
+        dt = float(dt) if not isinstance(dt, bool) else float("nan")
+        if not (dt > 0 and math.isfinite(dt)):
+            raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
+        if not (skin >= 0 and math.isfinite(skin)):
+            raise InputError("skin", f"must be >= 0 (got {skin!r})")
+        if int(leaf_size) < 1:
+            raise InputError("leaf_size", f"must be >= 1 (got {leaf_size!r})")
+        if int(collapse_limit) < 1:
+            raise InputError("collapse_limit", f"must be >= 1 (got {collapse_limit!r})")
+        self.physics = physics
+        self.dt = dt
+        self.skin = float(skin)
+        self.leaf_size = int(leaf_size)
+        self.collapse_limit = int(collapse_limit)
+        self.check_overlaps = bool(check_overlaps)
+        self.chunk_events = int(chunk_events)
+        hill = physics.hill
+        if hill is not None and 1.5 * hill.omega * dt >= 0.25:
+            raise InputError("dt", f"{dt} s is too long for the shearing sheet: "
+                             f"need 1.5*omega*dt < 0.25 (dt < {0.25 / (1.5 * hill.omega):.6g} s)")
+        self._load(state)
+        self.totals = np.zeros(K.NSTAT)
+        self.max_overlap = 0.0
+        self.steps_done = 0
+        self.step_stats = None
+
+    # ---- state in and out ------------------------------------------------
+    def _load(self, state):
+        n = state.n
+        if np.any(state.t_local != 0):
+            raise InputError("state.t_local", "must be zero between steps")
+        self.n = n
+        self.time = state.time
+        self.pos = state.pos.copy()
+        self.vel = state.vel.copy()
+        self.rad = state.radius.copy()
+        self.mass = state.mass.copy()
+        self.tl = np.zeros(n)
+        self.ncoll = state.ncoll.copy()
+        self.tlast = state.t_last.copy()
+        self.ids = np.arange(n, dtype=np.int64)
+        self.perm = np.arange(n, dtype=np.int32)
+        self.scratch = np.zeros(n, np.uint8)
+        self.anc = np.zeros((n, 3))
+        self.sig = np.zeros(n)
+        self.cis = np.zeros(n, np.int32)
+        self.work = np.zeros(256, np.int64)
+        self.stack2 = np.zeros((4096, 2), np.int64)
+        self.nnodes_cap = count_nodes(n, self.leaf_size)
+        self.ntop = np.zeros((self.nnodes_cap, 5), np.int32)
+        self.nbox = np.zeros((self.nnodes_cap, 6))
+        self.nrad = np.zeros(self.nnodes_cap)
+        self.nsig = np.zeros(self.nnodes_cap)
+        self.noff = np.zeros(n + 1, np.int64)
+        self.pair_cap = max(1024, 4 * n)
+        self.out_a = np.zeros(self.pair_cap, np.int32)
+        self.out_e = np.zeros(self.pair_cap, np.int32)
+        self.nent = np.zeros(2 * self.pair_cap, np.int32)
+        self.xhead = np.full(n, -1, np.int32)
+        self.xent = np.zeros(max(1024, n // 4), np.int32)
+        self.xnext = np.zeros(self.xent.shape[0], np.int32)
+        self.ctr = np.zeros(NCTR, np.int64)
+        self.evt = np.full(n, np.inf)
+        self.evp = np.full(n, -1, np.int32)
+        self.evc = np.zeros(n, np.int32)
+        self.tour = np.zeros(2 * tournament_size(n), np.int32)
+        jcap = max(256, n // 8)
+        self.jslot = np.zeros(jcap, np.int32)
+        self.jvel = np.zeros((jcap, 3))
+        self.jtlast = np.zeros(jcap)
+        self.par = np.zeros(K.NPAR)
+        self.ipar = np.zeros(K.NIPAR, np.int64)
+        self._encode()
+
+    def _encode(self):
+        ph = self.physics
+        par, ipar = self.par, self.ipar
+        dt = self.dt
+        hill = ph.hill
+        shear = 1.5 * hill.omega if hill is not None else 0.0
+        par[K.P_DT] = dt
+        par[K.P_SHEAR] = shear
+        par[K.P_FR] = 1.0 / (1.0 - shear * dt) if shear else 1.0
+        par[K.P_G] = ph.g
+        dish = ph.domain.code == DOMAIN_DISH
+        par[K.P_RCYL] = ph.domain.radius if dish else 0.0
+        law, e, vc, expo = ph.restitution.encode()
+        par[K.P_E] = e
+        par[K.P_VC] = vc
+        par[K.P_EXP] = expo
+        par[K.P_TC] = ph.guard.tc if ph.guard is not None else -1.0
+        par[K.P_WMIN] = 0.5 * ph.g * ph.guard.tc if ph.guard is not None else 0.0
+        # No pair may be in reach of two images of each other (nor a particle of its
+        # own image): the largest pair reach 2 sig + fr (r1 + r2) must stay below half
+        # the shortest period (r1, r2 the two largest radii).
+        period = ph.domain.min_period()
+        top = np.sort(self.rad)[-2:] if self.n >= 2 else np.array([0.0, 0.0])
+        r12 = float(top.sum()) if top.size == 2 else 2.0 * float(top.sum())
+        par[K.P_SIGMAX] = (0.5 * (0.5 * period - par[K.P_FR] * r12)
+                           if math.isfinite(period) else math.inf)
+        if par[K.P_SIGMAX] <= 0:
+            raise InputError("domain", f"the periodic box (shortest period {period:.6g} m) is "
+                             f"too small for particles of radii {top.tolist()} m: it must be "
+                             f"longer than 2 * (r1 + r2) = {2 * r12:.6g} m")
+        ipar[K.I_LAW] = law
+        ipar[K.I_DISH] = 1 if dish else 0
+        ipar[K.I_CAP] = self.collapse_limit
+
+    def state(self):
+        """The current state as a State ordered by particle id (a copy)."""
+        order = np.argsort(self.ids, kind="stable")
+        return State(self.pos[order], self.vel[order], self.rad[order], self.mass[order],
+                     self.tl[order], self.ncoll[order], self.tlast[order], self.time)
+
+    # ---- bundles -----------------------------------------------------------
+    def _bundles(self, img_pos, img_vel, img_all):
+        parts = (self.pos, self.vel, self.rad, self.mass, self.tl, self.ncoll, self.tlast, self.ids)
+        step = (self.anc, self.sig, self.cis, self.work)
+        tree = (self.ntop, self.nbox, self.nrad, self.nsig)
+        nbrs = (self.noff, self.nent, self.xhead, self.xent, self.xnext, self.ctr)
+        evq = (self.evt, self.evp, self.evc, self.tour)
+        jour = (self.jslot, self.jvel, self.jtlast)
+        cfg = (self.par, self.ipar, img_pos, img_vel, img_all)
+        return parts, step, tree, nbrs, evq, jour, cfg
+
+    # ---- the step ------------------------------------------------------------
+    def step(self):
+        """Advance one step of length dt.  Returns the step's statistics array."""
+        ph = self.physics
+        hill = ph.hill
+        if hill is not None:
+            kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
+        try:
+            st = self._drift_phase()
+        except BaseException:
+            if hill is not None:
+                kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
+            raise
+        K.drift_all(self.pos, self.vel, self.tl, self.dt)
+        if self.check_overlaps:
+            ov = K.max_overlap(self.pos, self.rad, self.noff, self.nent, self.xhead, self.xent,
+                               self.xnext, self._img_pos, self._img_vel, self.dt)
+            st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
+        K.leave_frame(self.pos, self.vel, self.tl, self.dt, ph.g)
+        self.time += self.dt
+        wrap(self.pos, self.vel, ph.domain.code, ph.domain.wrap_params(self.time))
+        if hill is not None:
+            kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
+        self._accumulate(st)
+        self.steps_done += 1
+        return st
+
+    def _accumulate(self, st):
+        m = self.totals[K.S_MAXOV]
+        c = self.totals[K.S_MAXCIS]
+        self.totals += st
+        self.totals[K.S_MAXOV] = max(m, st[K.S_MAXOV])
+        self.totals[K.S_MAXCIS] = max(c, st[K.S_MAXCIS])
+        self.step_stats = st
+
+    def _setup(self, img_pos, img_vel, half):
+        """Search radii, tree, storage order, candidate lists, first events."""
+        n = self.n
+        smax = K.compute_sigma(self.pos, self.vel, self.sig, self.par, self.skin)
+        if smax > self.par[K.P_SIGMAX]:
+            raise StepTooLargeError(
+                f"dt={self.dt}: a particle's search radius {smax:.4g} m exceeds the limit "
+                f"{self.par[K.P_SIGMAX]:.4g} m set by the periodic box; use a smaller dt or a "
+                f"larger box")
+        nnodes = build(self.pos, self.leaf_size, self.perm, self.ntop, self.work)
+        if nnodes < 0:
+            raise SimulationError("kD-tree deeper than its work stack")
+        for arr in (self.vel, self.pos):
+            permute_mat3(arr, self.perm, self.scratch)
+        for arr in (self.rad, self.mass, self.ncoll, self.tlast, self.ids, self.sig):
+            permute_vec(arr, self.perm, self.scratch)
+        self.perm[:] = np.arange(n, dtype=np.int32)
+        self.anc[:] = self.pos
+        node_bounds(self.anc, self.rad, self.sig, self.ntop, nnodes, self.nbox, self.nrad, self.nsig)
+        fr = self.par[K.P_FR]
+        while True:
+            npairs = pair_search(self.anc, self.rad, self.sig, self.ntop, self.nbox, self.nrad,
+                                 self.nsig, half, img_pos, fr, self.out_a, self.out_e,
+                                 self.stack2)
+            if npairs < 0:
+                raise SimulationError("pair search deeper than its work stack")
+            if npairs <= self.pair_cap:
+                break
+            self.pair_cap = int(npairs * 1.25) + 1024
+            self.out_a = np.zeros(self.pair_cap, np.int32)
+            self.out_e = np.zeros(self.pair_cap, np.int32)
+            self.nent = np.zeros(2 * self.pair_cap, np.int32)
+        self.npairs = npairs
+        build_csr(n, npairs, self.out_a, self.out_e, self.noff, self.nent)
+        K.reset_step(self.tl, self.cis, self.xhead, self.ctr)
+
+    def _drift_phase(self):
+        ph = self.physics
+        img_pos, img_vel, half, full = ph.domain.images(self.time)
+        self._img_pos, self._img_vel = img_pos, img_vel
+        self.par[K.P_T0] = self.time
+        while True:
+            self._setup(img_pos, img_vel, half)
+            st = np.zeros(K.NSTAT)
+            parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
+            K.init_events(parts, nbrs, evq, cfg)
+            while True:
+                try:
+                    status = K.run_events(parts, step, tree, nbrs, evq, jour, cfg, st,
+                                          self.chunk_events)
+                except BaseException:
+                    self._rollback()  # KeyboardInterrupt between events: undo the step
+                    raise
+                if status == K.OK:
+                    return st
+                if status == K.CHUNK:
+                    continue
+                if status == K.NEED_JOURNAL:
+                    self._grow_journal()
+                    parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
+                    continue
+                bad = int(self.ctr[K.CTR_BAD])
+                bad_id = int(self.ids[bad])
+                self._rollback()
+                if status == K.POOL_OVERFLOW:
+                    self._grow_pool()
+                    break  # redo the step with a larger pool: same result
+                if status == K.COLLAPSE:
+                    raise InelasticCollapseError(
+                        f"inelastic collapse at t = {self.time:.9g} s: particle {bad_id} collided "
+                        f"more than {self.collapse_limit} times within one step of {self.dt} s "
+                        f"(collisions per step explode). Enable the collapse guard "
+                        f"(restitution TC model, scenario key 'tc'), lower the restitution "
+                        f"dissipation, or raise collapse_limit if this is genuine. The state is "
+                        f"left at the last completed step.")
+                if status == K.SIGMA_TOO_LARGE:
+                    raise StepTooLargeError(
+                        f"at t = {self.time:.9g} s particle {bad_id} sped up so much that it could "
+                        f"reach a periodic image of itself within dt = {self.dt} s; use a "
+                        f"smaller dt. The state is left at the last completed step.")
+                raise SimulationError(f"engine status {STATUS_NAMES.get(status, status)}")
+
+    def _rollback(self):
+        K.rollback(self.pos, self.vel, self.tl, self.ncoll, self.tlast, self.anc, self.cis,
+                   self.jslot, self.jvel, self.jtlast, int(self.ctr[JCOUNT]))
+        self.ctr[JCOUNT] = 0
+
+    def _grow_journal(self):
+        cap = 2 * self.jslot.shape[0]
+        used = int(self.ctr[JCOUNT])
+        for name in ("jslot", "jvel", "jtlast"):
+            old = getattr(self, name)
+            new = np.zeros((cap,) + old.shape[1:], old.dtype)
+            new[:used] = old[:used]
+            setattr(self, name, new)
+
+    def _grow_pool(self):
+        cap = 2 * self.xent.shape[0]
+        self.xent = np.zeros(cap, np.int32)
+        self.xnext = np.zeros(cap, np.int32)
+
+    # ---- diagnostics ---------------------------------------------------------
+    def memory_bytes(self):
+        """Bytes held in the engine's arrays."""
+        return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))

@@ -1,0 +1,491 @@
+"""numba kernels of one step's drift phase: predict, collide, grow, run events.
+
+Argument bundles (tuples of plain arrays; all particle arrays in storage order,
+which is the tree order of the current step):
+
+* ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state; inside
+  the drift phase ``pos``/``vel`` are *frame* coordinates (free-falling frame
+  when there is gravity), ``tl`` the local step time of ``pos``.
+* ``step = (anc, sig, cis, work)`` — anchors (step-start positions, (N,3)),
+  search radii (N,), collisions of each particle in this step (N,) int32, and
+  an int64 work array (a search stack deeper than the tree).
+* ``tree = (ntop, nbox, nrad, nsig)`` — see ``tree``.
+* ``nbrs = (noff, nent, xhead, xent, xnext, ctr)`` — see ``neighbors``.
+* ``evq = (evt, evp, evc, tour)`` — see ``events``.
+* ``jour = (jslot, jvel, jtlast)`` — undo journal: the velocity and last
+  collision time of each particle before its first collision in the step.
+* ``cfg = (par, ipar, img_pos, img_vel, img_all)`` — step constants.
+* ``st`` (NSTAT,) float64 — statistics of the step.
+
+Kernels return a status code; all state lives in the arrays, so a kernel that
+stops for more room resumes exactly where it left off.
+"""
+import math
+
+import numpy as np
+from ._jit import kernel
+
+from .events import CYLINDER, FLOOR, NONE, update_queue, build_queue
+from .neighbors import JCOUNT, XCOUNT, add_pair
+from .predict import INF, cylinder_time, floor_time, pair_time
+from .restitution import coefficient
+from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2, raise_sigma
+
+# par: float parameters of the step
+P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_SIGMAX = range(12)
+NPAR = 12
+# ipar: integer parameters
+I_LAW, I_DISH, I_CAP = range(3)
+NIPAR = 4
+# st: statistics
+(S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
+ S_FLOORIMP, S_CYLIMP, S_MAXCIS) = range(12)
+NSTAT = 16
+# status codes
+OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK = range(6)
+CTR_BAD = 2  # ctr slot: the slot that caused a COLLAPSE / SIGMA_TOO_LARGE
+
+WALL_KEY_FLOOR = 1 << 62
+WALL_KEY_CYL = (1 << 62) + 1
+
+
+@kernel(inline=True)
+def advance(pos, vel, tl, i, t):
+    """Move particle i along its straight frame trajectory to step time t."""
+    d = t - tl[i]
+    pos[i, 0] += vel[i, 0] * d
+    pos[i, 1] += vel[i, 1] * d
+    pos[i, 2] += vel[i, 2] * d
+    tl[i] = t
+
+
+@kernel(inline=True)
+def predict(i, t_now, parts, nbrs, evq, cfg):
+    """Set particle i's earliest event at or after t_now (ties: partner id, image)."""
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    evt, evp, evc, tour = evq
+    par, ipar, img_pos, img_vel, img_all = cfg
+    t_end = par[P_DT]
+    best = INF
+    bkey = WALL_KEY_CYL + 1
+    bp = NONE
+    bc = 0
+    ri = rad[i]
+    for k in range(noff[i], noff[i + 1]):
+        e = nent[k]
+        j = e >> 5
+        img = e & 31
+        t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
+        if t <= best and t < INF:
+            key = ids[j] * 32 + img
+            if t < best or key < bkey:
+                best = t
+                bkey = key
+                bp = e
+                bc = ncoll[j]
+    x = xhead[i]
+    while x >= 0:
+        e = xent[x]
+        j = e >> 5
+        img = e & 31
+        t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
+        if t <= best and t < INF:
+            key = ids[j] * 32 + img
+            if t < best or key < bkey:
+                best = t
+                bkey = key
+                bp = e
+                bc = ncoll[j]
+        x = xnext[x]
+    if ipar[I_DISH] != 0:
+        t = floor_time(pos, vel, tl, i, ri, par[P_G], t_now, t_end)
+        if t < best:
+            best = t
+            bp = FLOOR
+        t = cylinder_time(pos, vel, tl, i, ri, par[P_RCYL], t_now, t_end)
+        if t < best:
+            best = t
+            bp = CYLINDER
+    evt[i] = best
+    evp[i] = bp
+    evc[i] = np.int32(bc)
+
+
+@kernel(inline=True)
+def journal(i, vel, tlast, cis, jour, ctr):
+    """Record i's velocity and last collision time before its first change this step."""
+    if cis[i] == 0:
+        jslot, jvel, jtlast = jour
+        k = ctr[JCOUNT]
+        jslot[k] = i
+        jvel[k, 0] = vel[i, 0]
+        jvel[k, 1] = vel[i, 1]
+        jvel[k, 2] = vel[i, 2]
+        jtlast[k] = tlast[i]
+        ctr[JCOUNT] = k + 1
+
+
+@kernel(inline=True)
+def grow(k, t, parts, step, tree, nbrs, cfg, st):
+    """Widen k's search radius after its velocity changed at step time t.
+
+    The new bound covers k's displacement so far plus its straight path to the
+    step end; if it exceeds the old one the tree's bounds are raised and the
+    tree is searched for partners k could now meet, which join both lists.
+    """
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    anc, sig, cis, work = step
+    ntop, nbox, nrad, nsig = tree
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    par, ipar, img_pos, img_vel, img_all = cfg
+    dt = par[P_DT]
+    s = par[P_SHEAR]
+    fr = par[P_FR]
+    x = pos[k, 0]
+    dx = x - anc[k, 0]
+    dy = (pos[k, 1] + s * t * x) - anc[k, 1]  # sheared-frame coordinate
+    dz = pos[k, 2] - anc[k, 2]
+    uy = vel[k, 1] + s * x  # velocity relative to the shear flow
+    speed = math.sqrt(vel[k, 0] * vel[k, 0] + uy * uy + vel[k, 2] * vel[k, 2])
+    new = math.sqrt(dx * dx + dy * dy + dz * dz) + (dt - t) * speed * (1.0 + s * dt)
+    if new <= sig[k]:
+        return OK
+    if new > par[P_SIGMAX]:
+        ctr[CTR_BAD] = k
+        return SIGMA_TOO_LARGE
+    sig[k] = new
+    raise_sigma(ntop, nsig, k, new)
+    st[S_GROW] += 1
+    stack = work  # depth-first: never more entries than the tree's depth + 1
+    for q in range(img_all.shape[0]):
+        img = img_all[q]
+        ox = img_pos[img, 0]
+        oy = img_pos[img, 1]
+        oz = img_pos[img, 2]
+        qx = anc[k, 0] - ox
+        qy = anc[k, 1] - oy
+        qz = anc[k, 2] - oz
+        stack[0] = 0
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            nd = stack[sp]
+            reach = sig[k] + nsig[nd] + fr * (rad[k] + nrad[nd])
+            if point_gap2(nbox, nd, qx, qy, qz) > reach * reach:
+                continue
+            left = ntop[nd, LEFT]
+            if left >= 0:
+                stack[sp] = ntop[nd, RIGHT]
+                stack[sp + 1] = left
+                sp += 2
+                continue
+            for m in range(ntop[nd, START], ntop[nd, END]):
+                if m == k and img == SELF_IMAGE:
+                    continue
+                if pair_reach_ok(anc, rad, sig, k, m, ox, oy, oz, fr):
+                    r = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
+                    if r < 0:
+                        return POOL_OVERFLOW
+                    st[S_ADDED] += r
+    return OK
+
+
+@kernel(inline=True)
+def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
+    """Resolve the collision of i with image img of j at step time t."""
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    anc, sig, cis, work = step
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    evt, evp, evc, tour = evq
+    par, ipar, img_pos, img_vel, img_all = cfg
+    journal(i, vel, tlast, cis, jour, ctr)
+    journal(j, vel, tlast, cis, jour, ctr)
+    advance(pos, vel, tl, i, t)
+    advance(pos, vel, tl, j, t)
+    dx = pos[i, 0] - pos[j, 0] - (img_pos[img, 0] + img_vel[img, 0] * t)
+    dy = pos[i, 1] - pos[j, 1] - (img_pos[img, 1] + img_vel[img, 1] * t)
+    dz = pos[i, 2] - pos[j, 2] - (img_pos[img, 2] + img_vel[img, 2] * t)
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    nx = dx / dist
+    ny = dy / dist
+    nz = dz / dist
+    vn = ((vel[i, 0] - vel[j, 0] - img_vel[img, 0]) * nx
+          + (vel[i, 1] - vel[j, 1] - img_vel[img, 1]) * ny
+          + (vel[i, 2] - vel[j, 2] - img_vel[img, 2]) * nz)
+    if vn >= 0.0:
+        # grazing: the predicted contact vanished in rounding; nothing happens
+        st[S_GRAZE] += 1
+    else:
+        now = par[P_T0] + t
+        tc = par[P_TC]
+        if tc > 0.0 and (now - tlast[i] < tc or now - tlast[j] < tc):
+            e = 1.0
+        else:
+            e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -vn)
+        mi = mass[i]
+        mj = mass[j]
+        imp = -(1.0 + e) * vn * (mi * mj / (mi + mj))
+        ai = imp / mi
+        aj = imp / mj
+        vel[i, 0] += ai * nx
+        vel[i, 1] += ai * ny
+        vel[i, 2] += ai * nz
+        vel[j, 0] -= aj * nx
+        vel[j, 1] -= aj * ny
+        vel[j, 2] -= aj * nz
+        ncoll[i] += 1
+        ncoll[j] += 1
+        cis[i] += 1
+        cis[j] += 1
+        tlast[i] = now
+        tlast[j] = now
+        st[S_PAIR] += 1
+        st[S_VIRIAL] += imp * dist
+        contact = rad[i] + rad[j]
+        ov = (contact - dist) / contact
+        if ov > st[S_MAXOV]:
+            st[S_MAXOV] = ov
+        c = max(cis[i], cis[j])
+        if c > st[S_MAXCIS]:
+            st[S_MAXCIS] = c
+        if c > ipar[I_CAP]:
+            ctr[CTR_BAD] = i if cis[i] >= cis[j] else j
+            return COLLAPSE
+        status = grow(i, t, parts, step, tree, nbrs, cfg, st)
+        if status != OK:
+            return status
+        status = grow(j, t, parts, step, tree, nbrs, cfg, st)
+        if status != OK:
+            return status
+    predict(i, t, parts, nbrs, evq, cfg)
+    update_queue(tour, evt, ids, i)
+    predict(j, t, parts, nbrs, evq, cfg)
+    update_queue(tour, evt, ids, j)
+    return OK
+
+
+@kernel(inline=True)
+def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
+    """Resolve particle i hitting the floor or the cylinder at step time t."""
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    anc, sig, cis, work = step
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    evt, evp, evc, tour = evq
+    par, ipar, img_pos, img_vel, img_all = cfg
+    journal(i, vel, tlast, cis, jour, ctr)
+    advance(pos, vel, tl, i, t)
+    # Walls neither follow nor reset the collapse guard's clock: a grain resting
+    # on the floor touches it every few tc, and if those touches made its next
+    # impacts elastic a bed would never lose its horizontal motion.  A wall ends
+    # its own Zeno sequence instead: the floor returns at least P_WMIN.
+    hit = False
+    if wall == FLOOR:
+        g0 = par[P_G]
+        w = vel[i, 2] - g0 * t  # real vertical velocity
+        if w <= 0.0:
+            e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -w)
+            w2 = -e * w
+            if w2 < par[P_WMIN]:
+                w2 = par[P_WMIN]
+            vel[i, 2] = w2 + g0 * t
+            st[S_FLOORIMP] += mass[i] * (w2 - w)
+            hit = True
+    else:
+        rho = math.sqrt(pos[i, 0] * pos[i, 0] + pos[i, 1] * pos[i, 1])
+        nx = pos[i, 0] / rho
+        ny = pos[i, 1] / rho
+        vn = vel[i, 0] * nx + vel[i, 1] * ny
+        if vn > 0.0:
+            e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], vn)
+            vel[i, 0] -= (1.0 + e) * vn * nx
+            vel[i, 1] -= (1.0 + e) * vn * ny
+            st[S_CYLIMP] += mass[i] * (1.0 + e) * vn
+            hit = True
+    if hit:
+        ncoll[i] += 1
+        cis[i] += 1
+        st[S_WALL] += 1
+        if cis[i] > st[S_MAXCIS]:
+            st[S_MAXCIS] = cis[i]
+        if cis[i] > ipar[I_CAP]:
+            ctr[CTR_BAD] = i
+            return COLLAPSE
+        status = grow(i, t, parts, step, tree, nbrs, cfg, st)
+        if status != OK:
+            return status
+    else:
+        st[S_GRAZE] += 1
+    predict(i, t, parts, nbrs, evq, cfg)
+    update_queue(tour, evt, ids, i)
+    return OK
+
+
+@kernel
+def init_events(parts, nbrs, evq, cfg):
+    """Predict every particle's first event of the step and build the queue."""
+    pos = parts[0]
+    ids = parts[7]
+    evt, evp, evc, tour = evq
+    for i in range(pos.shape[0]):
+        predict(i, 0.0, parts, nbrs, evq, cfg)
+    build_queue(tour, evt, ids, pos.shape[0])
+
+
+@kernel
+def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
+    """Process events in (time, id) order until the step end or a status.
+
+    Returns OK when no event is left before the step end, CHUNK after
+    ``max_events`` events, NEED_JOURNAL (nothing changed; grow the journal and
+    call again) or an error status (POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE:
+    the step must be rolled back).
+    """
+    ncoll = parts[5]
+    ids = parts[7]
+    ctr = nbrs[5]
+    evt, evp, evc, tour = evq
+    jslot = jour[0]
+    dt = cfg[0][P_DT]
+    done = 0
+    while done < max_events:
+        i = tour[1]
+        if i < 0:
+            return OK
+        t = evt[i]
+        if not t < dt:
+            return OK
+        p = evp[i]
+        st[S_POPS] += 1
+        if p >= 0:
+            j = p >> 5
+            if np.int32(ncoll[j]) != evc[i]:
+                st[S_STALE] += 1  # partner collided since: predict i again
+                predict(i, t, parts, nbrs, evq, cfg)
+                update_queue(tour, evt, ids, i)
+                continue
+            if ctr[JCOUNT] + 2 > jslot.shape[0]:
+                return NEED_JOURNAL
+            status = collide_pair(i, j, p & 31, t, parts, step, tree, nbrs, evq, jour, cfg, st)
+        else:
+            if ctr[JCOUNT] + 1 > jslot.shape[0]:
+                return NEED_JOURNAL
+            status = collide_wall(i, p, t, parts, step, tree, nbrs, evq, jour, cfg, st)
+        if status != OK:
+            return status
+        done += 1
+    return CHUNK
+
+
+@kernel
+def compute_sigma(pos, vel, sig, par, skin):
+    """Step-start search radii: own straight path plus a skin for later speed-ups.
+
+    sig = (|u| (1 + s dt) + skin * u_rms) dt + g dt^2 / 2, with u the velocity
+    relative to the shear flow.  Correctness does not depend on the skin (a
+    particle that outruns its radius widens it and searches again); it only
+    trades candidate-list length against such searches.
+    """
+    n = pos.shape[0]
+    dt = par[P_DT]
+    s = par[P_SHEAR]
+    g0 = par[P_G]
+    total = 0.0
+    for i in range(n):
+        uy = vel[i, 1] + s * pos[i, 0]
+        sp = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
+        sig[i] = sp
+        total += sp * sp
+    urms = math.sqrt(total / n) if n > 0 else 0.0
+    extra = skin * urms * dt + 0.5 * g0 * dt * dt
+    smax = 0.0
+    for i in range(n):
+        sig[i] = sig[i] * (1.0 + s * dt) * dt + extra
+        if sig[i] > smax:
+            smax = sig[i]
+    return smax
+
+
+@kernel
+def reset_step(tl, cis, xhead, ctr):
+    tl[:] = 0.0
+    cis[:] = 0
+    xhead[:] = -1
+    ctr[XCOUNT] = 0
+    ctr[JCOUNT] = 0
+
+
+@kernel
+def drift_all(pos, vel, tl, t):
+    """Move every particle along its frame trajectory to step time t."""
+    for i in range(pos.shape[0]):
+        d = t - tl[i]
+        pos[i, 0] += vel[i, 0] * d
+        pos[i, 1] += vel[i, 1] * d
+        pos[i, 2] += vel[i, 2] * d
+        tl[i] = t
+
+
+@kernel
+def leave_frame(pos, vel, tl, dt, g0):
+    """At the step end: back from the free-falling frame to real coordinates."""
+    if g0 != 0.0:
+        dz = 0.5 * g0 * dt * dt
+        dv = g0 * dt
+        for i in range(pos.shape[0]):
+            pos[i, 2] -= dz
+            vel[i, 2] -= dv
+    tl[:] = 0.0
+
+
+@kernel
+def max_overlap(pos, rad, noff, nent, xhead, xent, xnext, img_pos, img_vel, t):
+    """Largest relative overlap (contact - distance)/contact over candidate pairs.
+
+    All particles must be at the same step time t (as after ``drift_all``).
+    """
+    worst = 0.0
+    n = pos.shape[0]
+    for i in range(n):
+        k = noff[i]
+        x = xhead[i]
+        while True:
+            if k < noff[i + 1]:
+                e = nent[k]
+                k += 1
+            elif x >= 0:
+                e = xent[x]
+                x = xnext[x]
+            else:
+                break
+            j = e >> 5
+            if j < i:
+                continue
+            img = e & 31
+            dx = pos[i, 0] - pos[j, 0] - (img_pos[img, 0] + img_vel[img, 0] * t)
+            dy = pos[i, 1] - pos[j, 1] - (img_pos[img, 1] + img_vel[img, 1] * t)
+            dz = pos[i, 2] - pos[j, 2] - (img_pos[img, 2] + img_vel[img, 2] * t)
+            contact = rad[i] + rad[j]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            ov = (contact - d) / contact
+            if ov > worst:
+                worst = ov
+    return worst
+
+
+@kernel
+def rollback(pos, vel, tl, ncoll, tlast, anc, cis, jslot, jvel, jtlast, jcount):
+    """Undo the drift phase: positions from the anchors, velocities from the journal."""
+    for k in range(jcount):
+        s = jslot[k]
+        vel[s, 0] = jvel[k, 0]
+        vel[s, 1] = jvel[k, 1]
+        vel[s, 2] = jvel[k, 2]
+        tlast[s] = jtlast[k]
+    for i in range(pos.shape[0]):
+        pos[i, 0] = anc[i, 0]
+        pos[i, 1] = anc[i, 1]
+        pos[i, 2] = anc[i, 2]
+        tl[i] = 0.0
+        ncoll[i] -= cis[i]
+        cis[i] = 0

@@ -1,0 +1,78 @@
+"""Per-particle candidate lists for one step.
+
+A candidate entry is packed into one int32: ``(j << 5) | img`` — partner slot j
+in periodic image img (0..26, 13 = no shift).  The lists are symmetric: if i
+lists (j, img) then j lists (i, 26 - img).
+
+* The bulk comes from the tree's pair search and is stored as CSR:
+  ``noff`` (N+1,) int64 offsets into ``nent`` (2*pairs,) int32.
+* Pairs discovered later in the step (a particle's search radius grew after a
+  collision) go to a pool of singly linked extras: ``xhead`` (N,) int32 first
+  entry or -1, ``xent`` / ``xnext`` (X,) int32, and ``ctr[XCOUNT]`` entries used.
+"""
+import numpy as np
+from ._jit import kernel
+
+XCOUNT = 0  # ctr slot: extras used
+JCOUNT = 1  # ctr slot: journal entries used
+NCTR = 4
+
+
+@kernel
+def build_csr(n, npairs, out_a, out_e, noff, nent):
+    """Symmetric CSR lists from the pair search's output."""
+    for i in range(n + 1):
+        noff[i] = 0
+    for k in range(npairs):
+        noff[out_a[k] + 1] += 1
+        noff[(out_e[k] >> 5) + 1] += 1
+    for i in range(n):
+        noff[i + 1] += noff[i]
+    # fill using noff[i] as i's cursor; afterwards noff[i] is i's end: shift back
+    for k in range(npairs):
+        a = out_a[k]
+        e = out_e[k]
+        b = e >> 5
+        img = e & 31
+        nent[noff[a]] = e
+        noff[a] += 1
+        nent[noff[b]] = (a << 5) | (26 - img)
+        noff[b] += 1
+    for i in range(n, 0, -1):
+        noff[i] = noff[i - 1]
+    noff[0] = 0
+
+
+@kernel
+def has_entry(noff, nent, xhead, xent, xnext, i, packed):
+    for k in range(noff[i], noff[i + 1]):
+        if nent[k] == packed:
+            return True
+    x = xhead[i]
+    while x >= 0:
+        if xent[x] == packed:
+            return True
+        x = xnext[x]
+    return False
+
+
+@kernel
+def add_pair(noff, nent, xhead, xent, xnext, ctr, a, b, img):
+    """Add the symmetric candidate pair (a, b in image img) unless present.
+
+    Returns 1 if added, 0 if it was already there, -1 if the pool is full.
+    """
+    packed = (b << 5) | img
+    if has_entry(noff, nent, xhead, xent, xnext, a, packed):
+        return 0
+    x = ctr[XCOUNT]
+    if x + 2 > xent.shape[0]:
+        return -1
+    xent[x] = packed
+    xnext[x] = xhead[a]
+    xhead[a] = x
+    xent[x + 1] = (a << 5) | (26 - img)
+    xnext[x + 1] = xhead[b]
+    xhead[b] = x + 1
+    ctr[XCOUNT] = x + 2
+    return 1

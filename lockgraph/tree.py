@@ -1,0 +1,422 @@
+"""Binary kD-tree over step-start positions, and the searches that run on it.
+
+The tree is rebuilt every step over the *anchors* (particle positions at the
+start of the step).  Each node stores
+
+* ``ntop[k] = (left, right, start, end, parent)`` (int32): children (-1 for a
+  leaf), the half-open range of storage slots it covers, and its parent;
+* ``nbox[k] = (xlo, ylo, zlo, xhi, yhi, zhi)`` (float64, metres): bounding box of
+  the anchors below it;
+* ``nrad[k]``: largest particle radius below it (m);
+* ``nsig[k]``: largest *search radius* below it (m).  A particle's search radius
+  ``sig`` bounds how far it can move, in the frame that makes the step's
+  background motion vanish, between the step start and the step end.  It only
+  grows during a step (see ``raise_sigma``).
+
+Particles are stored in tree order: node ``k`` covers slots
+``start..end-1``.  ``build`` returns the permutation that puts them there.
+
+Two particles ``a`` and ``b`` (``b`` in periodic image ``img``) can meet within
+the step only if::
+
+    |anc[a] - anc[b] - img_pos[img]| <= sig[a] + sig[b] + fr * (rad[a] + rad[b])
+
+where ``fr >= 1`` accounts for the shear of the frame (``fr = 1`` without
+shear).  Both searches here return exactly the pairs that satisfy it.
+"""
+import numpy as np
+from ._jit import kernel
+
+LEFT, RIGHT, START, END, PARENT = 0, 1, 2, 3, 4
+SELF_IMAGE = 13  # image index of the box itself: (kx, ky, kz) = (0, 0, 0)
+
+
+def count_nodes(n, leaf_size):
+    """Number of nodes ``build`` creates for ``n`` particles."""
+    memo = {}
+
+    def count(m):
+        if m <= leaf_size:
+            return 1
+        if m not in memo:
+            memo[m] = 1 + count(m // 2) + count(m - m // 2)
+        return memo[m]
+
+    return count(max(n, 1))
+
+
+@kernel
+def _select(perm, pos, axis, lo, hi, k):
+    """Reorder perm[lo..hi] so that perm[k] holds the k-th smallest key."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        a = pos[perm[lo], axis]
+        b = pos[perm[mid], axis]
+        c = pos[perm[hi], axis]
+        if a > b:
+            a, b = b, a
+        if b > c:
+            b = c
+        pivot = a if a > b else b
+        i = lo
+        j = hi
+        while i <= j:
+            while pos[perm[i], axis] < pivot:
+                i += 1
+            while pos[perm[j], axis] > pivot:
+                j -= 1
+            if i <= j:
+                tmp = perm[i]
+                perm[i] = perm[j]
+                perm[j] = tmp
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return
+
+
+@kernel
+def build(pos, leaf_size, perm, ntop, stack):
+    """Build the tree topology over ``pos`` (N,3).
+
+    ``perm`` (N,) int32 must hold a permutation on entry (the identity, or the
+    previous step's order, which makes later reordering cheap); on exit slot
+    ``k`` of tree order holds particle ``perm[k]``.  Nodes are split at the
+    median of their longest axis.  ``stack`` is an int64 work array longer than
+    the tree's depth + 1.  Returns the number of nodes, or -1 if ``stack`` was
+    too short.
+    """
+    n = pos.shape[0]
+    ntop[0, LEFT] = -1
+    ntop[0, RIGHT] = -1
+    ntop[0, START] = 0
+    ntop[0, END] = n
+    ntop[0, PARENT] = -1
+    nnodes = 1
+    sp = 0
+    stack[sp] = 0
+    sp += 1
+    while sp > 0:
+        sp -= 1
+        nd = stack[sp]
+        s = ntop[nd, START]
+        e = ntop[nd, END]
+        if e - s <= leaf_size:
+            continue
+        lo0 = hi0 = pos[perm[s], 0]
+        lo1 = hi1 = pos[perm[s], 1]
+        lo2 = hi2 = pos[perm[s], 2]
+        for k in range(s + 1, e):
+            p = perm[k]
+            x = pos[p, 0]
+            y = pos[p, 1]
+            z = pos[p, 2]
+            if x < lo0:
+                lo0 = x
+            if x > hi0:
+                hi0 = x
+            if y < lo1:
+                lo1 = y
+            if y > hi1:
+                hi1 = y
+            if z < lo2:
+                lo2 = z
+            if z > hi2:
+                hi2 = z
+        axis = 0
+        ext = hi0 - lo0
+        if hi1 - lo1 > ext:
+            axis = 1
+            ext = hi1 - lo1
+        if hi2 - lo2 > ext:
+            axis = 2
+        m = (s + e) >> 1
+        _select(perm, pos, axis, s, e - 1, m)
+        left = nnodes
+        right = nnodes + 1
+        nnodes += 2
+        ntop[left, LEFT] = -1
+        ntop[left, RIGHT] = -1
+        ntop[left, START] = s
+        ntop[left, END] = m
+        ntop[left, PARENT] = nd
+        ntop[right, LEFT] = -1
+        ntop[right, RIGHT] = -1
+        ntop[right, START] = m
+        ntop[right, END] = e
+        ntop[right, PARENT] = nd
+        ntop[nd, LEFT] = left
+        ntop[nd, RIGHT] = right
+        if sp + 2 > stack.shape[0]:
+            return -1
+        stack[sp] = right
+        stack[sp + 1] = left
+        sp += 2
+    return nnodes
+
+
+@kernel
+def node_bounds(anc, rad, sig, ntop, nnodes, nbox, nrad, nsig):
+    """Fill box, max radius and max search radius of every node, bottom-up.
+
+    Children always have larger indices than their parent, so one reverse
+    sweep sees every child before its parent.  ``anc``, ``rad`` and ``sig`` are
+    in tree order.
+    """
+    for nd in range(nnodes - 1, -1, -1):
+        left = ntop[nd, LEFT]
+        if left < 0:
+            s = ntop[nd, START]
+            e = ntop[nd, END]
+            for a in range(3):
+                nbox[nd, a] = np.inf
+                nbox[nd, 3 + a] = -np.inf
+            mr = 0.0
+            ms = 0.0
+            for k in range(s, e):
+                for a in range(3):
+                    v = anc[k, a]
+                    if v < nbox[nd, a]:
+                        nbox[nd, a] = v
+                    if v > nbox[nd, 3 + a]:
+                        nbox[nd, 3 + a] = v
+                if rad[k] > mr:
+                    mr = rad[k]
+                if sig[k] > ms:
+                    ms = sig[k]
+            nrad[nd] = mr
+            nsig[nd] = ms
+        else:
+            right = ntop[nd, RIGHT]
+            for a in range(3):
+                nbox[nd, a] = min(nbox[left, a], nbox[right, a])
+                nbox[nd, 3 + a] = max(nbox[left, 3 + a], nbox[right, 3 + a])
+            nrad[nd] = max(nrad[left], nrad[right])
+            nsig[nd] = max(nsig[left], nsig[right])
+
+
+@kernel(inline=True)
+def _box_gap2(nbox, a, b, ox, oy, oz):
+    """Squared distance between the box of node a and the box of node b shifted by o."""
+    d2 = 0.0
+    g = nbox[a, 0] - (nbox[b, 3] + ox)
+    h = (nbox[b, 0] + ox) - nbox[a, 3]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    g = nbox[a, 1] - (nbox[b, 4] + oy)
+    h = (nbox[b, 1] + oy) - nbox[a, 4]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    g = nbox[a, 2] - (nbox[b, 5] + oz)
+    h = (nbox[b, 2] + oz) - nbox[a, 5]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    return d2
+
+
+@kernel(inline=True)
+def point_gap2(nbox, nd, qx, qy, qz):
+    """Squared distance from point q to the box of node nd."""
+    d2 = 0.0
+    g = nbox[nd, 0] - qx
+    h = qx - nbox[nd, 3]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    g = nbox[nd, 1] - qy
+    h = qy - nbox[nd, 4]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    g = nbox[nd, 2] - qz
+    h = qz - nbox[nd, 5]
+    if h > g:
+        g = h
+    if g > 0.0:
+        d2 += g * g
+    return d2
+
+
+@kernel(inline=True)
+def pair_reach_ok(anc, rad, sig, a, b, ox, oy, oz, fr):
+    """True if particles a and b (b shifted by o) may meet within the step."""
+    dx = anc[a, 0] - anc[b, 0] - ox
+    dy = anc[a, 1] - anc[b, 1] - oy
+    dz = anc[a, 2] - anc[b, 2] - oz
+    reach = sig[a] + sig[b] + fr * (rad[a] + rad[b])
+    return dx * dx + dy * dy + dz * dz <= reach * reach
+
+
+@kernel
+def pair_search(anc, rad, sig, ntop, nbox, nrad, nsig, half_images, img_pos, fr,
+                out_a, out_e, stack):
+    """Two-argument (dual-tree) recursion from the root: all candidate pairs.
+
+    For every image in ``half_images`` (the self image and one of each pair of
+    opposite periodic images) the recursion runs over (root, root).  Each
+    unordered pair of particles is reported once, as ``out_a[k] = a`` and
+    ``out_e[k] = (b << 5) | img`` (b in image img).  Returns the number of
+    pairs found; if that exceeds the buffers' length only the first
+    ``len(out_a)`` are stored and the caller retries with larger buffers.
+    ``stack`` is an (M, 2) int64 work array; -1 is returned if it was too short
+    (depth-first traversal needs about three entries per tree level).
+    """
+    cap = out_a.shape[0]
+    count = 0
+    for q in range(half_images.shape[0]):
+        img = half_images[q]
+        ox = img_pos[img, 0]
+        oy = img_pos[img, 1]
+        oz = img_pos[img, 2]
+        selfimg = img == SELF_IMAGE
+        sp = 0
+        stack[0, 0] = 0
+        stack[0, 1] = 0
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            na = stack[sp, 0]
+            nb = stack[sp, 1]
+            la = ntop[na, LEFT]
+            lb = ntop[nb, LEFT]
+            if sp + 3 > stack.shape[0]:
+                return -1
+            if selfimg and na == nb:
+                if la < 0:
+                    s = ntop[na, START]
+                    e = ntop[na, END]
+                    for a in range(s, e):
+                        for b in range(a + 1, e):
+                            if pair_reach_ok(anc, rad, sig, a, b, 0.0, 0.0, 0.0, fr):
+                                if count < cap:
+                                    out_a[count] = a
+                                    out_e[count] = (b << 5) | img
+                                count += 1
+                else:
+                    ra = ntop[na, RIGHT]
+                    stack[sp, 0] = la
+                    stack[sp, 1] = la
+                    stack[sp + 1, 0] = la
+                    stack[sp + 1, 1] = ra
+                    stack[sp + 2, 0] = ra
+                    stack[sp + 2, 1] = ra
+                    sp += 3
+                continue
+            reach = nsig[na] + nsig[nb] + fr * (nrad[na] + nrad[nb])
+            if _box_gap2(nbox, na, nb, ox, oy, oz) > reach * reach:
+                continue
+            if la < 0 and lb < 0:
+                for a in range(ntop[na, START], ntop[na, END]):
+                    # skip a at once if it is out of reach of the whole leaf nb
+                    ra = sig[a] + nsig[nb] + fr * (rad[a] + nrad[nb])
+                    if point_gap2(nbox, nb, anc[a, 0] - ox, anc[a, 1] - oy,
+                                  anc[a, 2] - oz) > ra * ra:
+                        continue
+                    for b in range(ntop[nb, START], ntop[nb, END]):
+                        if a == b:
+                            continue  # a particle never meets its own image
+                        if pair_reach_ok(anc, rad, sig, a, b, ox, oy, oz, fr):
+                            if count < cap:
+                                out_a[count] = a
+                                out_e[count] = (b << 5) | img
+                            count += 1
+                continue
+            split_a = lb < 0
+            if la >= 0 and lb >= 0:
+                ea = max(nbox[na, 3] - nbox[na, 0], nbox[na, 4] - nbox[na, 1],
+                         nbox[na, 5] - nbox[na, 2])
+                eb = max(nbox[nb, 3] - nbox[nb, 0], nbox[nb, 4] - nbox[nb, 1],
+                         nbox[nb, 5] - nbox[nb, 2])
+                split_a = ea >= eb
+            if split_a:
+                stack[sp, 0] = la
+                stack[sp, 1] = nb
+                stack[sp + 1, 0] = ntop[na, RIGHT]
+                stack[sp + 1, 1] = nb
+            else:
+                stack[sp, 0] = na
+                stack[sp, 1] = lb
+                stack[sp + 1, 0] = na
+                stack[sp + 1, 1] = ntop[nb, RIGHT]
+            sp += 2
+    return count
+
+
+@kernel
+def find_leaf(ntop, slot):
+    """Index of the leaf whose slot range contains ``slot``."""
+    nd = 0
+    while ntop[nd, LEFT] >= 0:
+        left = ntop[nd, LEFT]
+        if slot < ntop[left, END]:
+            nd = left
+        else:
+            nd = ntop[nd, RIGHT]
+    return nd
+
+
+@kernel
+def raise_sigma(ntop, nsig, slot, value):
+    """Raise the search radius bound of every node above ``slot`` to ``value``."""
+    nd = find_leaf(ntop, slot)
+    while nd >= 0 and nsig[nd] < value:
+        nsig[nd] = value
+        nd = ntop[nd, PARENT]
+
+
+@kernel
+def permute_vec(a, perm, scratch):
+    """In place a[k] = a_old[perm[k]] for a 1-D array (no temporary copies)."""
+    n = perm.shape[0]
+    scratch[:] = 0
+    for s in range(n):
+        if scratch[s] or perm[s] == s:
+            continue
+        tmp = a[s]
+        k = s
+        while True:
+            scratch[k] = 1
+            src = perm[k]
+            if src == s:
+                a[k] = tmp
+                break
+            a[k] = a[src]
+            k = src
+
+
+@kernel
+def permute_mat3(a, perm, scratch):
+    """In place a[k, :] = a_old[perm[k], :] for an (N,3) array."""
+    n = perm.shape[0]
+    scratch[:] = 0
+    for s in range(n):
+        if scratch[s] or perm[s] == s:
+            continue
+        t0 = a[s, 0]
+        t1 = a[s, 1]
+        t2 = a[s, 2]
+        k = s
+        while True:
+            scratch[k] = 1
+            src = perm[k]
+            if src == s:
+                a[k, 0] = t0
+                a[k, 1] = t1
+                a[k, 2] = t2
+                break
+            a[k, 0] = a[src, 0]
+            a[k, 1] = a[src, 1]
+            a[k, 2] = a[src, 2]
+            k = src
