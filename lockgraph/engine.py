@@ -48,10 +48,11 @@ class Engine:
         taken as inelastic collapse.
     check_overlaps : bool — measure the largest overlap among candidate pairs at
         every step end (cheap; on by default).
+    record_events : bool — keep a log of every resolved collision (``events()``).
     """
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=8, collapse_limit=10000,
-                 check_overlaps=True, chunk_events=1 << 20):
+                 check_overlaps=True, chunk_events=1 << 20, record_events=False):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
@@ -68,6 +69,7 @@ class Engine:
         self.collapse_limit = int(collapse_limit)
         self.check_overlaps = bool(check_overlaps)
         self.chunk_events = int(chunk_events)
+        self.record_events = bool(record_events)
         hill = physics.hill
         if hill is not None and 1.5 * hill.omega * dt >= 0.25:
             raise InputError("dt", f"{dt} s is too long for the shearing sheet: "
@@ -122,6 +124,10 @@ class Engine:
         self.jslot = np.zeros(jcap, np.int32)
         self.jvel = np.zeros((jcap, 3))
         self.jtlast = np.zeros(jcap)
+        lcap = 1024 if self.record_events else 0
+        self.logt = np.zeros(lcap)
+        self.logi = np.zeros((lcap, 3), np.int64)
+        self.log_steps = []  # (step index, first log entry) per step
         self.par = np.zeros(K.NPAR)
         self.ipar = np.zeros(K.NIPAR, np.int64)
         self._encode()
@@ -173,7 +179,7 @@ class Engine:
         tree = (self.ntop, self.nbox, self.nrad, self.nsig)
         nbrs = (self.noff, self.nent, self.xhead, self.xent, self.xnext, self.ctr)
         evq = (self.evt, self.evp, self.evc, self.tour)
-        jour = (self.jslot, self.jvel, self.jtlast)
+        jour = (self.jslot, self.jvel, self.jtlast, self.logt, self.logi)
         cfg = (self.par, self.ipar, img_pos, img_vel, img_all)
         return parts, step, tree, nbrs, evq, jour, cfg
 
@@ -253,8 +259,10 @@ class Engine:
         img_pos, img_vel, half, full = ph.domain.images(self.time)
         self._img_pos, self._img_vel = img_pos, img_vel
         self.par[K.P_T0] = self.time
+        log_start = int(self.ctr[K.LCOUNT]) if self.record_events else 0
         while True:
             self._setup(img_pos, img_vel, half)
+            self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
             K.init_events(parts, nbrs, evq, cfg)
@@ -266,16 +274,22 @@ class Engine:
                     self._rollback()  # KeyboardInterrupt between events: undo the step
                     raise
                 if status == K.OK:
+                    if self.record_events:
+                        self.log_steps.append((self.steps_done, log_start))
                     return st
                 if status == K.CHUNK:
                     continue
-                if status == K.NEED_JOURNAL:
-                    self._grow_journal()
+                if status in (K.NEED_JOURNAL, K.NEED_LOG):
+                    if status == K.NEED_JOURNAL:
+                        self._grow_journal()
+                    else:
+                        self._grow_log()
                     parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
                     continue
                 bad = int(self.ctr[K.CTR_BAD])
                 bad_id = int(self.ids[bad])
                 self._rollback()
+                self.ctr[K.LCOUNT] = log_start
                 if status == K.POOL_OVERFLOW:
                     self._grow_pool()
                     break  # redo the step with a larger pool: same result
@@ -307,6 +321,34 @@ class Engine:
             new = np.zeros((cap,) + old.shape[1:], old.dtype)
             new[:used] = old[:used]
             setattr(self, name, new)
+
+    def _grow_log(self):
+        cap = 2 * self.logt.shape[0]
+        used = int(self.ctr[K.LCOUNT])
+        logt = np.zeros(cap)
+        logi = np.zeros((cap, 3), np.int64)
+        logt[:used] = self.logt[:used]
+        logi[:used] = self.logi[:used]
+        self.logt, self.logi = logt, logi
+
+    def events(self):
+        """The event log: a structured array of every resolved collision, in order.
+
+        Fields: ``step`` (index), ``t`` (s since that step's start), ``a`` and
+        ``b`` (particle ids; b is FLOOR = -2 or CYLINDER = -3 for walls) and
+        ``img`` (periodic image of b seen from a; 13 = none).
+        """
+        used = int(self.ctr[K.LCOUNT])
+        out = np.zeros(used, dtype=[("step", np.int64), ("t", np.float64), ("a", np.int64),
+                                    ("b", np.int64), ("img", np.int64)])
+        bounds = self.log_steps + [(None, used)]
+        for (step, start), (_, end) in zip(bounds[:-1], bounds[1:]):
+            out["step"][start:end] = step
+        out["t"] = self.logt[:used]
+        out["a"] = self.logi[:used, 0]
+        out["b"] = self.logi[:used, 1]
+        out["img"] = self.logi[:used, 2]
+        return out
 
     def _grow_pool(self):
         cap = 2 * self.xent.shape[0]

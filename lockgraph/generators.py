@@ -211,8 +211,10 @@ def fcc_gas(p):
     length = (n * math.pi * d ** 3 / (6.0 * eta)) ** (1.0 / 3.0)
     a = length / m
     if a / math.sqrt(2.0) <= d:
+        good = ", ".join(str(4 * k ** 3) for k in range(3, 9))
         raise ScenarioError("params.eta", f"eta = {eta} is too dense for an FCC start with "
-                            f"n = {n} (lattice spacing {a / math.sqrt(2.0):.4g} < diameter {d})")
+                            f"n = {n} (lattice spacing {a / math.sqrt(2.0):.4g} < diameter {d}); "
+                            f"choose n = 4 m^3 ({good}, ...) or slightly less")
     base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
     cells = np.stack(np.meshgrid(*(np.arange(m),) * 3, indexing="ij"), -1).reshape(-1, 3)
     sites = ((cells[:, None, :] + base[None]) * a).reshape(-1, 3) - 0.5 * length + 0.25 * a

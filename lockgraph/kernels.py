@@ -12,8 +12,11 @@ which is the tree order of the current step):
 * ``tree = (ntop, nbox, nrad, nsig)`` — see ``tree``.
 * ``nbrs = (noff, nent, xhead, xent, xnext, ctr)`` — see ``neighbors``.
 * ``evq = (evt, evp, evc, tour)`` — see ``events``.
-* ``jour = (jslot, jvel, jtlast)`` — undo journal: the velocity and last
-  collision time of each particle before its first collision in the step.
+* ``jour = (jslot, jvel, jtlast, logt, logi)`` — undo journal: the velocity
+  and last collision time of each particle before its first collision in the
+  step; and the optional event log (empty arrays: off): ``logt`` (L,) step
+  time and ``logi`` (L,3) int64 ``(id_a, id_b or FLOOR/CYLINDER, img)`` of
+  every resolved collision, seen from particle a.
 * ``cfg = (par, ipar, img_pos, img_vel, img_all)`` — step constants.
 * ``st`` (NSTAT,) float64 — statistics of the step.
 
@@ -26,7 +29,7 @@ import numpy as np
 from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, build_queue
-from .neighbors import JCOUNT, XCOUNT, add_pair
+from .neighbors import JCOUNT, LCOUNT, XCOUNT, add_pair
 from .predict import INF, cylinder_time, floor_time, pair_time
 from .restitution import coefficient
 from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2, raise_sigma
@@ -42,7 +45,7 @@ NIPAR = 4
  S_FLOORIMP, S_CYLIMP, S_MAXCIS) = range(12)
 NSTAT = 16
 # status codes
-OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK = range(6)
+OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG = range(7)
 CTR_BAD = 2  # ctr slot: the slot that caused a COLLAPSE / SIGMA_TOO_LARGE
 
 WALL_KEY_FLOOR = 1 << 62
@@ -116,7 +119,9 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
 def journal(i, vel, tlast, cis, jour, ctr):
     """Record i's velocity and last collision time before its first change this step."""
     if cis[i] == 0:
-        jslot, jvel, jtlast = jour
+        jslot = jour[0]
+        jvel = jour[1]
+        jtlast = jour[2]
         k = ctr[JCOUNT]
         jslot[k] = i
         jvel[k, 0] = vel[i, 0]
@@ -124,6 +129,19 @@ def journal(i, vel, tlast, cis, jour, ctr):
         jvel[k, 2] = vel[i, 2]
         jtlast[k] = tlast[i]
         ctr[JCOUNT] = k + 1
+
+
+@kernel(inline=True)
+def log_event(jour, ctr, t, a, b, img):
+    logt = jour[3]
+    if logt.shape[0] > 0:
+        logi = jour[4]
+        k = ctr[LCOUNT]
+        logt[k] = t
+        logi[k, 0] = a
+        logi[k, 1] = b
+        logi[k, 2] = img
+        ctr[LCOUNT] = k + 1
 
 
 @kernel(inline=True)
@@ -242,6 +260,7 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         tlast[j] = now
         st[S_PAIR] += 1
         st[S_VIRIAL] += imp * dist
+        log_event(jour, ctr, t, ids[i], ids[j], img)
         contact = rad[i] + rad[j]
         ov = (contact - dist) / contact
         if ov > st[S_MAXOV]:
@@ -306,6 +325,7 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         ncoll[i] += 1
         cis[i] += 1
         st[S_WALL] += 1
+        log_event(jour, ctr, t, ids[i], wall, SELF_IMAGE)
         if cis[i] > st[S_MAXCIS]:
             st[S_MAXCIS] = cis[i]
         if cis[i] > ipar[I_CAP]:
@@ -346,6 +366,7 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
     ctr = nbrs[5]
     evt, evp, evc, tour = evq
     jslot = jour[0]
+    logt = jour[3]
     dt = cfg[0][P_DT]
     done = 0
     while done < max_events:
@@ -356,6 +377,8 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
         if not t < dt:
             return OK
         p = evp[i]
+        if logt.shape[0] > 0 and ctr[LCOUNT] >= logt.shape[0]:
+            return NEED_LOG
         st[S_POPS] += 1
         if p >= 0:
             j = p >> 5

@@ -15,6 +15,8 @@ from ._jit import kernel
 
 XCOUNT = 0  # ctr slot: extras used
 JCOUNT = 1  # ctr slot: journal entries used
+# ctr slot 2 is the engine's CTR_BAD
+LCOUNT = 3  # ctr slot: event-log entries used
 NCTR = 4
 
 

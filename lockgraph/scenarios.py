@@ -285,6 +285,8 @@ def _late(scene, p, progress, use_cache):
     gen_opt = GENERATORS[scene.generator][2]
     marble = scene.late == "settle" and "marble_radius" in p
     base_p = {k: v for k, v in p.items() if not (marble and k in gen_opt)}
+    if marble:
+        base_p["n"] = p["n"] - 1  # the bed alone: the same key as the dish scene's
     st, geometry = GENERATORS[scene.generator][0](base_p)
     physics = build_physics(scene, base_p, geometry)
     key = _cache_key(scene, base_p, "late")

@@ -1,0 +1,88 @@
+"""Restitution laws, the collapse guard, and inelastic collapse without it."""
+import numpy as np
+import pytest
+
+from lockgraph import scenarios
+from lockgraph.engine import Engine
+from lockgraph.errors import InelasticCollapseError
+from lockgraph.physics import Physics
+from lockgraph.restitution import Bridges, CollapseGuard, Constant, coefficient
+from lockgraph.simulation import Simulation
+from lockgraph.state import State
+
+from .helpers import cube
+
+
+def test_bridges_formula():
+    law, e, vc, p = Bridges().encode()
+    assert coefficient(law, e, vc, p, 7.7e-5) == 1.0
+    assert coefficient(law, e, vc, p, 1e-6) == 1.0
+    assert coefficient(law, e, vc, p, 7.7e-3) == pytest.approx(100 ** -0.234, rel=1e-14)
+
+
+@pytest.mark.parametrize("tc,want", [
+    # guard on: impacts 2 and 3 come within tc of impact 1 and are elastic
+    (1.0, [0.0, 0.25, 0.75]),
+    # guard off in effect (tc tiny): every impact has e = 0.5
+    (1e-9, [0.0625 * 0 + 0.25 * 0.25 / 1.0 * 0 + 0.15625, 0.1328125 - 0.0390625 + 0.0390625 * 0,
+            0.5625]),
+])
+def test_guard_makes_quick_repeats_elastic(tc, want):
+    """Three spheres in a row (gap 0.05 between 1 and 2); sphere 0 hits 1 at
+    speed 1.  With the guard, the follow-up impacts are elastic."""
+    pos = np.array([[-2.0, 0, 0], [0.0, 0, 0], [1.05, 0, 0]])
+    vel = np.array([[1.0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    st = State(pos, vel, np.full(3, 0.5), np.ones(3))
+    eng = Engine(st, cube(e=0.5, guard=CollapseGuard(tc)), 3.0, record_events=True)
+    eng.step()
+    ev = eng.events()
+    out = eng.state()
+    if tc == 1.0:
+        assert len(ev) == 3
+        assert np.allclose(out.vel[:, 0], want, atol=1e-12)
+    else:
+        # e = 0.5 throughout: momentum 1 is conserved, kinetic energy is lost
+        assert out.momentum()[0] == pytest.approx(1.0, rel=1e-12)
+        assert out.vel[2, 0] == pytest.approx(0.5625, rel=1e-12)  # 0.75 * (1 + e) / 2
+
+
+def test_collapse_without_guard_stops_with_diagnosis():
+    """A grain dropped on the floor with e < 1 and no guard bounces infinitely
+    often in finite time: the step is refused, the state stays at the last step."""
+    from lockgraph.domains import Dish
+    from lockgraph.forces import Gravity
+
+    ph = Physics(Dish(0.01), (Gravity(9.81),), Constant(0.5), None)
+    st = State([[0.0, 0.0, 0.0012]], [[0, 0, 0]], [0.001], [1.0])
+    sim = Simulation(st, ph, dt=0.005, collapse_limit=2000)
+    with pytest.raises(InelasticCollapseError, match=r"inelastic collapse.*particle 0.*collapse guard"):
+        sim.run(100)
+    before = sim.state
+    assert before.time > 0  # some steps completed
+    # the failed step left no trace: running it again fails identically
+    with pytest.raises(InelasticCollapseError):
+        sim.run(1)
+    after = sim.state
+    assert np.array_equal(before.pos, after.pos) and np.array_equal(before.vel, after.vel)
+    assert before.time == after.time and np.array_equal(before.ncoll, after.ncoll)
+
+
+def test_guard_prevents_collapse():
+    from lockgraph.domains import Dish
+    from lockgraph.forces import Gravity
+
+    ph = Physics(Dish(0.01), (Gravity(9.81),), Constant(0.5), CollapseGuard(1e-4))
+    st = State([[0.0, 0.0, 0.0012]], [[0, 0, 0]], [0.001], [1.0])
+    sim = Simulation(st, ph, dt=0.005)
+    sim.run(100)
+    s = sim.state
+    assert s.pos[0, 2] >= 0.001 - 1e-15
+    # resting: hops of at most ~ (g tc / 2)^2 / (2 g) above contact
+    assert s.pos[0, 2] - 0.001 < 1e-6
+
+
+def test_dish_late_state_is_at_rest():
+    sc = scenarios.load("dish", "late", n=300, params={"cylinder_radius": 0.005})
+    speed = np.sqrt((sc.state.vel ** 2).sum(1))
+    assert speed.max() < sc.params["settle_speed"]
+    assert np.all(sc.state.pos[:, 2] >= sc.state.radius * (1 - 1e-12))
