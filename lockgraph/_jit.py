@@ -11,7 +11,7 @@ from numba import njit
 
 
 def kernel(fn=None, *, inline=False):
-    opts = dict(cache=True, nogil=True, _nrt=False)
+    opts = dict(cache=True, nogil=True, _nrt=False, error_model="numpy")
     if inline:
         opts["inline"] = "always"
     if fn is None:

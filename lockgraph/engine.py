@@ -28,7 +28,8 @@ from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, XCOUNT, build_csr
 from .state import State
-from .tree import build, count_nodes, node_bounds, pair_search, permute_mat3, permute_vec
+from .tree import (NTOP, build, count_nodes, identity, node_bounds, pair_search, permute_mat3,
+                   permute_vec, rebuild)
 
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk"}
@@ -44,69 +45,80 @@ class Engine:
     dt : float, s — step length (> 0).
     skin : float — extra search radius, in units of the rms speed times dt.
     leaf_size : int — particles per kD-tree leaf.
+    rebuild_every : int — build the tree from scratch every this many steps;
+        in between, particles are re-sorted into the last tree's nodes.
     collapse_limit : int — collisions of one particle within one step that are
         taken as inelastic collapse.
-    check_overlaps : bool — measure the largest overlap among candidate pairs at
-        every step end (cheap; on by default).
+    The largest overlap among candidate pairs is measured at every step start
+    (free: the first predictions see every pair) and, when asked, at a step's
+    end (``step(check_end=True)``; the simulation does it after its last step).
     record_events : bool — keep a log of every resolved collision (``events()``).
+    copy : bool — work on a copy of the state's arrays (default).  With
+        ``copy=False`` the engine takes the arrays over (no second copy in
+        memory); the State object passed in must not be used afterwards.
     """
 
-    def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=8, collapse_limit=10000,
-                 check_overlaps=True, chunk_events=1 << 20, record_events=False):
+    def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
+                 chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
         if not (skin >= 0 and math.isfinite(skin)):
             raise InputError("skin", f"must be >= 0 (got {skin!r})")
-        if int(leaf_size) < 1:
-            raise InputError("leaf_size", f"must be >= 1 (got {leaf_size!r})")
+        if not 1 <= int(leaf_size) <= 256:
+            raise InputError("leaf_size", f"must be in 1..256 (got {leaf_size!r})")
         if int(collapse_limit) < 1:
             raise InputError("collapse_limit", f"must be >= 1 (got {collapse_limit!r})")
         self.physics = physics
         self.dt = dt
         self.skin = float(skin)
         self.leaf_size = int(leaf_size)
+        self.rebuild_every = int(rebuild_every)
         self.collapse_limit = int(collapse_limit)
-        self.check_overlaps = bool(check_overlaps)
         self.chunk_events = int(chunk_events)
         self.record_events = bool(record_events)
         hill = physics.hill
         if hill is not None and 1.5 * hill.omega * dt >= 0.25:
             raise InputError("dt", f"{dt} s is too long for the shearing sheet: "
                              f"need 1.5*omega*dt < 0.25 (dt < {0.25 / (1.5 * hill.omega):.6g} s)")
-        self._load(state)
+        self._load(state, copy)
         self.totals = np.zeros(K.NSTAT)
         self.max_overlap = 0.0
         self.steps_done = 0
         self.step_stats = None
 
     # ---- state in and out ------------------------------------------------
-    def _load(self, state):
+    def _load(self, state, copy):
         n = state.n
         if np.any(state.t_local != 0):
             raise InputError("state.t_local", "must be zero between steps")
+        take = (lambda a: a.copy()) if copy else (lambda a: a)
         self.n = n
         self.time = state.time
-        self.pos = state.pos.copy()
-        self.vel = state.vel.copy()
-        self.rad = state.radius.copy()
-        self.mass = state.mass.copy()
-        self.tl = np.zeros(n)
-        self.ncoll = state.ncoll.copy()
-        self.tlast = state.t_last.copy()
-        self.ids = np.arange(n, dtype=np.int64)
+        self.pos = take(state.pos)
+        self.vel = take(state.vel)
+        self.rad = take(state.radius)
+        self.mass = take(state.mass)
+        self.tl = take(state.t_local)
+        self.ncoll = take(state.ncoll)
+        # last-collision times matter only to the collapse guard: not kept otherwise
+        self.guarded = self.physics.guard is not None
+        self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
+        self.tlast_in = None if self.guarded else state.t_last.copy() if copy else state.t_last
+        self.ids = np.arange(n, dtype=np.int32)
         self.perm = np.arange(n, dtype=np.int32)
         self.scratch = np.zeros(n, np.uint8)
         self.anc = np.zeros((n, 3))
-        self.sig = np.zeros(n)
+        self.reach = np.zeros(n)
+        self.top = np.zeros(2)
         self.cis = np.zeros(n, np.int32)
         self.work = np.zeros(256, np.int64)
         self.stack2 = np.zeros((4096, 2), np.int64)
         self.nnodes_cap = count_nodes(n, self.leaf_size)
-        self.ntop = np.zeros((self.nnodes_cap, 5), np.int32)
+        self.ntop = np.zeros((self.nnodes_cap, NTOP), np.int32)
+        self.since_build = None  # steps since the tree was last built from scratch
         self.nbox = np.zeros((self.nnodes_cap, 6))
-        self.nrad = np.zeros(self.nnodes_cap)
-        self.nsig = np.zeros(self.nnodes_cap)
+        self.nreach = np.zeros(self.nnodes_cap)
         self.noff = np.zeros(n + 1, np.int64)
         self.pair_cap = max(1024, 4 * n)
         self.out_a = np.zeros(self.pair_cap, np.int32)
@@ -119,7 +131,8 @@ class Engine:
         self.evt = np.full(n, np.inf)
         self.evp = np.full(n, -1, np.int32)
         self.evc = np.zeros(n, np.int32)
-        self.tour = np.zeros(2 * tournament_size(n), np.int32)
+        self.tour_t = np.full(2 * tournament_size(n), np.inf)
+        self.tour_s = np.full(2 * tournament_size(n), -1, np.int32)
         jcap = max(256, n // 8)
         self.jslot = np.zeros(jcap, np.int32)
         self.jvel = np.zeros((jcap, 3))
@@ -151,14 +164,13 @@ class Engine:
         par[K.P_TC] = ph.guard.tc if ph.guard is not None else -1.0
         par[K.P_WMIN] = 0.5 * ph.g * ph.guard.tc if ph.guard is not None else 0.0
         # No pair may be in reach of two images of each other (nor a particle of its
-        # own image): the largest pair reach 2 sig + fr (r1 + r2) must stay below half
-        # the shortest period (r1, r2 the two largest radii).
+        # own image): the two largest reaches must sum to less than half the
+        # shortest period.  Radii alone must already fit.
         period = ph.domain.min_period()
+        par[K.P_HALFPER] = 0.5 * period if math.isfinite(period) else math.inf
         top = np.sort(self.rad)[-2:] if self.n >= 2 else np.array([0.0, 0.0])
         r12 = float(top.sum()) if top.size == 2 else 2.0 * float(top.sum())
-        par[K.P_SIGMAX] = (0.5 * (0.5 * period - par[K.P_FR] * r12)
-                           if math.isfinite(period) else math.inf)
-        if par[K.P_SIGMAX] <= 0:
+        if par[K.P_FR] * r12 >= par[K.P_HALFPER]:
             raise InputError("domain", f"the periodic box (shortest period {period:.6g} m) is "
                              f"too small for particles of radii {top.tolist()} m: it must be "
                              f"longer than 2 * (r1 + r2) = {2 * r12:.6g} m")
@@ -168,24 +180,34 @@ class Engine:
 
     def state(self):
         """The current state as a State ordered by particle id (a copy)."""
-        order = np.argsort(self.ids, kind="stable")
+        order = np.empty(self.n, np.int64)
+        order[self.ids] = np.arange(self.n)
+        if self.guarded:
+            t_last = self.tlast[order]
+        else:
+            # without a collapse guard collision times are not tracked: as given
+            t_last = self.tlast_in.copy()
         return State(self.pos[order], self.vel[order], self.rad[order], self.mass[order],
-                     self.tl[order], self.ncoll[order], self.tlast[order], self.time)
+                     self.tl[order], self.ncoll[order], t_last, self.time)
 
     # ---- bundles -----------------------------------------------------------
     def _bundles(self, img_pos, img_vel, img_all):
         parts = (self.pos, self.vel, self.rad, self.mass, self.tl, self.ncoll, self.tlast, self.ids)
-        step = (self.anc, self.sig, self.cis, self.work)
-        tree = (self.ntop, self.nbox, self.nrad, self.nsig)
+        step = (self.anc, self.reach, self.cis, self.work)
+        tree = (self.ntop, self.nbox, self.nreach)
         nbrs = (self.noff, self.nent, self.xhead, self.xent, self.xnext, self.ctr)
-        evq = (self.evt, self.evp, self.evc, self.tour)
+        evq = (self.evt, self.evp, self.evc, self.tour_t, self.tour_s)
         jour = (self.jslot, self.jvel, self.jtlast, self.logt, self.logi)
         cfg = (self.par, self.ipar, img_pos, img_vel, img_all)
         return parts, step, tree, nbrs, evq, jour, cfg
 
     # ---- the step ------------------------------------------------------------
-    def step(self):
-        """Advance one step of length dt.  Returns the step's statistics array."""
+    def step(self, check_end=False):
+        """Advance one step of length dt.  Returns the step's statistics array.
+
+        ``check_end``: also measure the largest overlap among candidate pairs at
+        the step end (an O(candidates) pass).
+        """
         ph = self.physics
         hill = ph.hill
         if hill is not None:
@@ -197,7 +219,7 @@ class Engine:
                 kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
             raise
         K.drift_all(self.pos, self.vel, self.tl, self.dt)
-        if self.check_overlaps:
+        if check_end:
             ov = K.max_overlap(self.pos, self.rad, self.noff, self.nent, self.xhead, self.xent,
                                self.xnext, self._img_pos, self._img_vel, self.dt)
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
@@ -218,30 +240,45 @@ class Engine:
         self.totals[K.S_MAXCIS] = max(c, st[K.S_MAXCIS])
         self.step_stats = st
 
-    def _setup(self, img_pos, img_vel, half):
-        """Search radii, tree, storage order, candidate lists, first events."""
+    def _setup(self, img_pos, img_vel, half, touching_only=False):
+        """Search radii, tree, storage order, candidate lists, first events.
+
+        ``touching_only``: search radii zero, so the lists hold the pairs that
+        touch or overlap now (for checking an input state).
+        """
         n = self.n
-        smax = K.compute_sigma(self.pos, self.vel, self.sig, self.par, self.skin)
-        if smax > self.par[K.P_SIGMAX]:
-            raise StepTooLargeError(
-                f"dt={self.dt}: a particle's search radius {smax:.4g} m exceeds the limit "
-                f"{self.par[K.P_SIGMAX]:.4g} m set by the periodic box; use a smaller dt or a "
-                f"larger box")
-        nnodes = build(self.pos, self.leaf_size, self.perm, self.ntop, self.work)
-        if nnodes < 0:
-            raise SimulationError("kD-tree deeper than its work stack")
+        if touching_only:
+            self.reach[:] = self.rad
+        else:
+            K.compute_reach(self.pos, self.vel, self.rad, self.reach, self.par, self.skin, self.top)
+            if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
+                raise StepTooLargeError(
+                    f"dt={self.dt}: two particles' reaches ({self.top[0]:.4g} and "
+                    f"{self.top[1]:.4g} m) could span half the periodic box "
+                    f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
+            self.par[K.P_RMAX] = self.top[0]
+        if self.since_build is None or self.since_build >= self.rebuild_every:
+            nnodes = build(self.pos, self.leaf_size, self.perm, self.ntop, self.work)
+            if nnodes < 0:
+                raise SimulationError("kD-tree deeper than its work stack")
+            self.nnodes = nnodes
+            self.since_build = 0
+        else:
+            nnodes = self.nnodes
+            rebuild(self.pos, self.perm, self.ntop, nnodes)
+            self.since_build += 1
         for arr in (self.vel, self.pos):
             permute_mat3(arr, self.perm, self.scratch)
-        for arr in (self.rad, self.mass, self.ncoll, self.tlast, self.ids, self.sig):
+        for arr in (self.rad, self.mass, self.ncoll, self.ids, self.reach):
             permute_vec(arr, self.perm, self.scratch)
-        self.perm[:] = np.arange(n, dtype=np.int32)
+        if self.guarded:
+            permute_vec(self.tlast, self.perm, self.scratch)
+        identity(self.perm)
         self.anc[:] = self.pos
-        node_bounds(self.anc, self.rad, self.sig, self.ntop, nnodes, self.nbox, self.nrad, self.nsig)
-        fr = self.par[K.P_FR]
+        node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         while True:
-            npairs = pair_search(self.anc, self.rad, self.sig, self.ntop, self.nbox, self.nrad,
-                                 self.nsig, half, img_pos, fr, self.out_a, self.out_e,
-                                 self.stack2)
+            npairs = pair_search(self.anc, self.reach, self.ntop, self.nbox, self.nreach, half,
+                                 img_pos, self.out_a, self.out_e, self.stack2)
             if npairs < 0:
                 raise SimulationError("pair search deeper than its work stack")
             if npairs <= self.pair_cap:
@@ -265,7 +302,7 @@ class Engine:
             self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
-            K.init_events(parts, nbrs, evq, cfg)
+            K.init_events(parts, nbrs, evq, cfg, st)
             while True:
                 try:
                     status = K.run_events(parts, step, tree, nbrs, evq, jour, cfg, st,
@@ -356,6 +393,21 @@ class Engine:
         self.xnext = np.zeros(cap, np.int32)
 
     # ---- diagnostics ---------------------------------------------------------
+    def initial_overlap(self, tol):
+        """(largest relative overlap, id a, id b, pairs above tol) of the current state.
+
+        Uses the engine's own tree and lists, so checking a large input state
+        costs no memory beyond the engine's.
+        """
+        img_pos, img_vel, half, full = self.physics.domain.images(self.time)
+        self._setup(img_pos, img_vel, half, touching_only=True)
+        out = np.zeros(3, np.int64)
+        worst = K.overlap_report(self.pos, self.rad, self.noff, self.nent, img_pos, tol, out)
+        a = int(self.ids[out[0]]) if out[0] >= 0 else -1
+        b = int(self.ids[out[1]]) if out[1] >= 0 else -1
+        return float(worst), min(a, b), max(a, b), int(out[2])
+
+
     def memory_bytes(self):
         """Bytes held in the engine's arrays."""
         return sum(v.nbytes for v in vars(self).values() if isinstance(v, np.ndarray))

@@ -9,10 +9,14 @@ Per storage slot ``i``:
 * ``evc[i]``: the partner's collision counter (low 32 bits) when the event was
   predicted.  The event is stale when the partner has collided since.
 
-``tour`` (2P,) int32, P a power of two >= N, is a complete binary tree whose
-leaf ``P + i`` is slot i and whose inner nodes hold the winner of their two
-children.  Events are ordered by (time, particle id): the order depends only on
-the physics and the ids, never on storage order or thread count.
+The queue is a tournament tree over *buckets* of ``BUCKET`` consecutive slots
+(storage is in tree order, so a bucket is a small spatial region): leaf
+``Q + b`` holds the earliest event of bucket b, each inner node the earlier of
+its two children, the root the earliest of all.  Nodes store their winner's
+key — ``tour_t`` (2Q,) float64 time and ``tour_s`` (2Q,) int32 slot — so a
+climb compares neighbouring memory and never chases particles.  Events are
+ordered by (time, particle id): the order depends only on the physics and the
+ids, never on storage order or thread count.
 """
 import numpy as np
 from ._jit import kernel
@@ -22,11 +26,31 @@ FLOOR = -2
 CYLINDER = -3
 
 
+BUCKET_BITS = 3
+BUCKET = 1 << BUCKET_BITS
+
+
 def tournament_size(n):
-    p = 1
-    while p < max(n, 1):
-        p *= 2
-    return p
+    """Q: the number of leaves (a power of two >= the number of buckets)."""
+    buckets = (max(n, 1) + BUCKET - 1) // BUCKET
+    q = 1
+    while q < buckets:
+        q *= 2
+    return q
+
+
+@kernel(inline=True)
+def key_less(t1, s1, t2, s2, ids):
+    """(t1, slot s1) before (t2, slot s2)?  Slot -1 means 'none'."""
+    if t1 < t2:
+        return True
+    if t1 > t2:
+        return False
+    if s2 < 0:
+        return s1 >= 0
+    if s1 < 0:
+        return False
+    return ids[s1] < ids[s2]
 
 
 @kernel(inline=True)
@@ -36,33 +60,61 @@ def earlier(a, b, evt, ids):
         return False
     if b < 0:
         return True
-    ta = evt[a]
-    tb = evt[b]
-    if ta < tb:
-        return True
-    if ta > tb:
-        return False
-    return ids[a] < ids[b]
-
-
-@kernel
-def build_queue(tour, evt, ids, n):
-    p = tour.shape[0] >> 1
-    for k in range(p):
-        tour[p + k] = k if k < n else -1
-    for k in range(p - 1, 0, -1):
-        a = tour[2 * k]
-        b = tour[2 * k + 1]
-        tour[k] = a if earlier(a, b, evt, ids) else b
+    return key_less(evt[a], a, evt[b], b, ids)
 
 
 @kernel(inline=True)
-def update_queue(tour, evt, ids, i):
-    """Restore the tournament after evt[i] changed."""
-    k = (tour.shape[0] >> 1) + i
+def _bucket_min(evt, ids, b, n):
+    lo = b << BUCKET_BITS
+    hi = min(lo + BUCKET, n)
+    bt = np.inf
+    bs = -1
+    for k in range(lo, hi):
+        if key_less(evt[k], k, bt, bs, ids):
+            bt = evt[k]
+            bs = k
+    return bt, bs
+
+
+@kernel
+def build_queue(tour_t, tour_s, evt, ids, n):
+    q = tour_t.shape[0] >> 1
+    for b in range(q):
+        t, s = _bucket_min(evt, ids, b, n)
+        tour_t[q + b] = t
+        tour_s[q + b] = s
+    for k in range(q - 1, 0, -1):
+        a = 2 * k
+        if key_less(tour_t[a + 1], tour_s[a + 1], tour_t[a], tour_s[a], ids):
+            a += 1
+        tour_t[k] = tour_t[a]
+        tour_s[k] = tour_s[a]
+
+
+@kernel(inline=True)
+def update_queue(tour_t, tour_s, evt, ids, i):
+    """Restore the tournament after evt[i] changed.
+
+    Recomputes i's bucket, then climbs; stops at the first node whose winner
+    (time and slot) is unchanged — nothing above it can change either.
+    """
+    q = tour_t.shape[0] >> 1
+    b = i >> BUCKET_BITS
+    t, s = _bucket_min(evt, ids, b, evt.shape[0])
+    k = q + b
+    if tour_t[k] == t and tour_s[k] == s and s != i:
+        return
+    tour_t[k] = t
+    tour_s[k] = s
     k >>= 1
     while k >= 1:
-        a = tour[2 * k]
-        b = tour[2 * k + 1]
-        tour[k] = a if earlier(a, b, evt, ids) else b
+        a = 2 * k
+        if key_less(tour_t[a + 1], tour_s[a + 1], tour_t[a], tour_s[a], ids):
+            a += 1
+        t = tour_t[a]
+        s = tour_s[a]
+        if tour_t[k] == t and tour_s[k] == s:
+            return
+        tour_t[k] = t
+        tour_s[k] = s
         k >>= 1

@@ -3,15 +3,17 @@
 Argument bundles (tuples of plain arrays; all particle arrays in storage order,
 which is the tree order of the current step):
 
-* ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state; inside
+* ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state (``tlast``
+  is empty unless the physics has a collapse guard; ``ids`` int32); inside
   the drift phase ``pos``/``vel`` are *frame* coordinates (free-falling frame
   when there is gravity), ``tl`` the local step time of ``pos``.
-* ``step = (anc, sig, cis, work)`` — anchors (step-start positions, (N,3)),
-  search radii (N,), collisions of each particle in this step (N,) int32, and
-  an int64 work array (a search stack deeper than the tree).
-* ``tree = (ntop, nbox, nrad, nsig)`` — see ``tree``.
+* ``step = (anc, reach, cis, work)`` — anchors (step-start positions, (N,3)),
+  reaches (N,) (search radius + fr * radius, see ``tree``), collisions of each
+  particle in this step (N,) int32, and an int64 work array (a search stack
+  deeper than the tree).
+* ``tree = (ntop, nbox, nreach)`` — see ``tree``.
 * ``nbrs = (noff, nent, xhead, xent, xnext, ctr)`` — see ``neighbors``.
-* ``evq = (evt, evp, evc, tour)`` — see ``events``.
+* ``evq = (evt, evp, evc, tour_t, tour_s)`` — see ``events``.
 * ``jour = (jslot, jvel, jtlast, logt, logi)`` — undo journal: the velocity
   and last collision time of each particle before its first collision in the
   step; and the optional event log (empty arrays: off): ``logt`` (L,) step
@@ -32,11 +34,12 @@ from .events import CYLINDER, FLOOR, NONE, update_queue, build_queue
 from .neighbors import JCOUNT, LCOUNT, XCOUNT, add_pair
 from .predict import INF, cylinder_time, floor_time, pair_time
 from .restitution import coefficient
-from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2, raise_sigma
+from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2, raise_reach
 
 # par: float parameters of the step
-P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_SIGMAX = range(12)
-NPAR = 12
+(P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_HALFPER,
+ P_RMAX) = range(13)
+NPAR = 16
 # ipar: integer parameters
 I_LAW, I_DISH, I_CAP = range(3)
 NIPAR = 4
@@ -67,7 +70,7 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
     """Set particle i's earliest event at or after t_now (ties: partner id, image)."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour = evq
+    evt, evp, evc, tour_t, tour_s = evq
     par, ipar, img_pos, img_vel, img_all = cfg
     t_end = par[P_DT]
     best = INF
@@ -127,7 +130,8 @@ def journal(i, vel, tlast, cis, jour, ctr):
         jvel[k, 0] = vel[i, 0]
         jvel[k, 1] = vel[i, 1]
         jvel[k, 2] = vel[i, 2]
-        jtlast[k] = tlast[i]
+        if tlast.shape[0] > 0:  # tracked only under a collapse guard
+            jtlast[k] = tlast[i]
         ctr[JCOUNT] = k + 1
 
 
@@ -153,8 +157,8 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
     tree is searched for partners k could now meet, which join both lists.
     """
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
-    anc, sig, cis, work = step
-    ntop, nbox, nrad, nsig = tree
+    anc, reach, cis, work = step
+    ntop, nbox, nreach = tree
     noff, nent, xhead, xent, xnext, ctr = nbrs
     par, ipar, img_pos, img_vel, img_all = cfg
     dt = par[P_DT]
@@ -166,14 +170,17 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
     dz = pos[k, 2] - anc[k, 2]
     uy = vel[k, 1] + s * x  # velocity relative to the shear flow
     speed = math.sqrt(vel[k, 0] * vel[k, 0] + uy * uy + vel[k, 2] * vel[k, 2])
-    new = math.sqrt(dx * dx + dy * dy + dz * dz) + (dt - t) * speed * (1.0 + s * dt)
-    if new <= sig[k]:
+    sig = math.sqrt(dx * dx + dy * dy + dz * dz) + (dt - t) * speed * (1.0 + s * dt)
+    new = sig + fr * rad[k]
+    if new <= reach[k]:
         return OK
-    if new > par[P_SIGMAX]:
+    if new + par[P_RMAX] >= par[P_HALFPER]:
         ctr[CTR_BAD] = k
         return SIGMA_TOO_LARGE
-    sig[k] = new
-    raise_sigma(ntop, nsig, k, new)
+    reach[k] = new
+    if new > par[P_RMAX]:
+        par[P_RMAX] = new
+    raise_reach(ntop, nreach, k, new)
     st[S_GROW] += 1
     stack = work  # depth-first: never more entries than the tree's depth + 1
     for q in range(img_all.shape[0]):
@@ -189,8 +196,8 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
         while sp > 0:
             sp -= 1
             nd = stack[sp]
-            reach = sig[k] + nsig[nd] + fr * (rad[k] + nrad[nd])
-            if point_gap2(nbox, nd, qx, qy, qz) > reach * reach:
+            r = reach[k] + nreach[nd]
+            if point_gap2(nbox, nd, qx, qy, qz) > r * r:
                 continue
             left = ntop[nd, LEFT]
             if left >= 0:
@@ -201,11 +208,11 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
             for m in range(ntop[nd, START], ntop[nd, END]):
                 if m == k and img == SELF_IMAGE:
                     continue
-                if pair_reach_ok(anc, rad, sig, k, m, ox, oy, oz, fr):
-                    r = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
-                    if r < 0:
+                if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
+                    added = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
+                    if added < 0:
                         return POOL_OVERFLOW
-                    st[S_ADDED] += r
+                    st[S_ADDED] += added
     return OK
 
 
@@ -213,9 +220,9 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
 def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
     """Resolve the collision of i with image img of j at step time t."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
-    anc, sig, cis, work = step
+    anc, reach, cis, work = step
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour = evq
+    evt, evp, evc, tour_t, tour_s = evq
     par, ipar, img_pos, img_vel, img_all = cfg
     journal(i, vel, tlast, cis, jour, ctr)
     journal(j, vel, tlast, cis, jour, ctr)
@@ -256,8 +263,9 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         ncoll[j] += 1
         cis[i] += 1
         cis[j] += 1
-        tlast[i] = now
-        tlast[j] = now
+        if tc > 0.0:
+            tlast[i] = now
+            tlast[j] = now
         st[S_PAIR] += 1
         st[S_VIRIAL] += imp * dist
         log_event(jour, ctr, t, ids[i], ids[j], img)
@@ -278,9 +286,9 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         if status != OK:
             return status
     predict(i, t, parts, nbrs, evq, cfg)
-    update_queue(tour, evt, ids, i)
+    update_queue(tour_t, tour_s, evt, ids, i)
     predict(j, t, parts, nbrs, evq, cfg)
-    update_queue(tour, evt, ids, j)
+    update_queue(tour_t, tour_s, evt, ids, j)
     return OK
 
 
@@ -288,9 +296,9 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
 def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
     """Resolve particle i hitting the floor or the cylinder at step time t."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
-    anc, sig, cis, work = step
+    anc, reach, cis, work = step
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour = evq
+    evt, evp, evc, tour_t, tour_s = evq
     par, ipar, img_pos, img_vel, img_all = cfg
     journal(i, vel, tlast, cis, jour, ctr)
     advance(pos, vel, tl, i, t)
@@ -337,19 +345,78 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
     else:
         st[S_GRAZE] += 1
     predict(i, t, parts, nbrs, evq, cfg)
-    update_queue(tour, evt, ids, i)
+    update_queue(tour_t, tour_s, evt, ids, i)
     return OK
 
 
+@kernel(inline=True)
+def _offer(i, t, e, key_e, evt, evp, evc, ids, ncoll):
+    """Make (t, partner e) i's pending event if it comes first by (time, partner id, image)."""
+    cur = evt[i]
+    if t > cur:
+        return
+    if t == cur:
+        p = evp[i]
+        if p >= 0 and ids[p >> 5] * 32 + (p & 31) <= key_e:
+            return
+    evt[i] = t
+    evp[i] = e
+    evc[i] = np.int32(ncoll[e >> 5])
+
+
 @kernel
-def init_events(parts, nbrs, evq, cfg):
-    """Predict every particle's first event of the step and build the queue."""
-    pos = parts[0]
-    ids = parts[7]
-    evt, evp, evc, tour = evq
-    for i in range(pos.shape[0]):
-        predict(i, 0.0, parts, nbrs, evq, cfg)
-    build_queue(tour, evt, ids, pos.shape[0])
+def init_events(parts, nbrs, evq, cfg, st):
+    """Predict every particle's first event of the step and build the queue.
+
+    Each candidate pair is predicted once and offered to both particles; the
+    outcome equals ``predict`` run on every particle (same minimum by
+    (time, partner id, image), walls after pairs).  On the way it measures the
+    largest relative overlap among the pairs (all particles are at the step
+    start) into ``st[S_MAXOV]``.
+    """
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    evt, evp, evc, tour_t, tour_s = evq
+    par, ipar, img_pos, img_vel, img_all = cfg
+    n = pos.shape[0]
+    t_end = par[P_DT]
+    for i in range(n):
+        evt[i] = INF
+        evp[i] = NONE
+        evc[i] = 0
+    for i in range(n):
+        ri = rad[i]
+        for k in range(noff[i], noff[i + 1]):
+            e = nent[k]
+            j = e >> 5
+            if j < i:
+                continue  # the pair was offered from j's list
+            img = e & 31
+            contact = ri + rad[j]
+            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
+            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
+            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < contact * contact:
+                ov = (contact - math.sqrt(d2)) / contact
+                if ov > st[S_MAXOV]:
+                    st[S_MAXOV] = ov
+            t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, contact, 0.0, t_end)
+            if t < INF:
+                _offer(i, t, e, ids[j] * 32 + img, evt, evp, evc, ids, ncoll)
+                _offer(j, t, (i << 5) | (26 - img), ids[i] * 32 + 26 - img, evt, evp, evc,
+                       ids, ncoll)
+    if ipar[I_DISH] != 0:
+        for i in range(n):
+            t = floor_time(pos, vel, tl, i, rad[i], par[P_G], 0.0, t_end)
+            if t < evt[i]:
+                evt[i] = t
+                evp[i] = FLOOR
+            t = cylinder_time(pos, vel, tl, i, rad[i], par[P_RCYL], 0.0, t_end)
+            if t < evt[i]:
+                evt[i] = t
+                evp[i] = CYLINDER
+    build_queue(tour_t, tour_s, evt, ids, n)
 
 
 @kernel
@@ -364,13 +431,13 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
     ncoll = parts[5]
     ids = parts[7]
     ctr = nbrs[5]
-    evt, evp, evc, tour = evq
+    evt, evp, evc, tour_t, tour_s = evq
     jslot = jour[0]
     logt = jour[3]
     dt = cfg[0][P_DT]
     done = 0
     while done < max_events:
-        i = tour[1]
+        i = tour_s[1]
         if i < 0:
             return OK
         t = evt[i]
@@ -385,7 +452,7 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
             if np.int32(ncoll[j]) != evc[i]:
                 st[S_STALE] += 1  # partner collided since: predict i again
                 predict(i, t, parts, nbrs, evq, cfg)
-                update_queue(tour, evt, ids, i)
+                update_queue(tour_t, tour_s, evt, ids, i)
                 continue
             if ctr[JCOUNT] + 2 > jslot.shape[0]:
                 return NEED_JOURNAL
@@ -401,32 +468,39 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
 
 
 @kernel
-def compute_sigma(pos, vel, sig, par, skin):
-    """Step-start search radii: own straight path plus a skin for later speed-ups.
+def compute_reach(pos, vel, rad, reach, par, skin, top):
+    """Step-start reaches: search radius plus fr times the radius.
 
-    sig = (|u| (1 + s dt) + skin * u_rms) dt + g dt^2 / 2, with u the velocity
-    relative to the shear flow.  Correctness does not depend on the skin (a
-    particle that outruns its radius widens it and searches again); it only
-    trades candidate-list length against such searches.
+    The search radius is sig = (|u| (1 + s dt) + skin * u_rms) dt + g dt^2 / 2,
+    with u the velocity relative to the shear flow: the particle's own straight
+    path plus a skin for later speed-ups.  Correctness does not depend on the
+    skin (a particle that outruns its reach widens it and searches again); it
+    only trades candidate-list length against such searches.  ``top`` (2,)
+    receives the two largest reaches.
     """
     n = pos.shape[0]
     dt = par[P_DT]
     s = par[P_SHEAR]
     g0 = par[P_G]
+    fr = par[P_FR]
     total = 0.0
     for i in range(n):
         uy = vel[i, 1] + s * pos[i, 0]
         sp = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
-        sig[i] = sp
+        reach[i] = sp
         total += sp * sp
     urms = math.sqrt(total / n) if n > 0 else 0.0
     extra = skin * urms * dt + 0.5 * g0 * dt * dt
-    smax = 0.0
+    top[0] = 0.0
+    top[1] = 0.0
     for i in range(n):
-        sig[i] = sig[i] * (1.0 + s * dt) * dt + extra
-        if sig[i] > smax:
-            smax = sig[i]
-    return smax
+        r = (reach[i] * (1.0 + s * dt) * dt + extra) + fr * rad[i]
+        reach[i] = r
+        if r > top[0]:
+            top[1] = top[0]
+            top[0] = r
+        elif r > top[1]:
+            top[1] = r
 
 
 @kernel
@@ -497,6 +571,39 @@ def max_overlap(pos, rad, noff, nent, xhead, xent, xnext, img_pos, img_vel, t):
 
 
 @kernel
+def overlap_report(pos, rad, noff, nent, img_pos, tol, out):
+    """Largest relative overlap among candidate pairs at step time 0.
+
+    ``out`` (3,) int64 receives (slot a, slot b, pairs overlapping by more
+    than ``tol``); returns the largest overlap.
+    """
+    worst = 0.0
+    count = 0
+    out[0] = -1
+    out[1] = -1
+    for i in range(pos.shape[0]):
+        for k in range(noff[i], noff[i + 1]):
+            e = nent[k]
+            j = e >> 5
+            if j < i:
+                continue
+            img = e & 31
+            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
+            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
+            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
+            c = rad[i] + rad[j]
+            ov = (c - math.sqrt(dx * dx + dy * dy + dz * dz)) / c
+            if ov > tol:
+                count += 1
+            if ov > worst:
+                worst = ov
+                out[0] = i
+                out[1] = j
+    out[2] = count
+    return worst
+
+
+@kernel
 def rollback(pos, vel, tl, ncoll, tlast, anc, cis, jslot, jvel, jtlast, jcount):
     """Undo the drift phase: positions from the anchors, velocities from the journal."""
     for k in range(jcount):
@@ -504,7 +611,8 @@ def rollback(pos, vel, tl, ncoll, tlast, anc, cis, jslot, jvel, jtlast, jcount):
         vel[s, 0] = jvel[k, 0]
         vel[s, 1] = jvel[k, 1]
         vel[s, 2] = jvel[k, 2]
-        tlast[s] = jtlast[k]
+        if tlast.shape[0] > 0:
+            tlast[s] = jtlast[k]
     for i in range(pos.shape[0]):
         pos[i, 0] = anc[i, 0]
         pos[i, 1] = anc[i, 1]

@@ -45,23 +45,20 @@ def max_overlap(state, domain):
     pos = state.pos.copy()
     perm = np.arange(n, dtype=np.int32)
     leaf = 8
-    ntop = np.zeros((count_nodes(n, leaf), 5), np.int32)
+    ntop = np.zeros((count_nodes(n, leaf), 6), np.int32)
     nn = build(pos, leaf, perm, ntop, np.zeros(256, np.int64))
     anc = pos[perm]
     rad = state.radius[perm]
-    sig = np.zeros(n)
     nbox = np.zeros((nn, 6))
-    nrad = np.zeros(nn)
-    nsig = np.zeros(nn)
-    node_bounds(anc, rad, sig, ntop, nn, nbox, nrad, nsig)
+    nreach = np.zeros(nn)
+    node_bounds(anc, rad, ntop, nn, nbox, nreach)
     img_pos, img_vel, half, full = domain.images(state.time)
     cap = 4 * n + 1024
     stack = np.zeros((4096, 2), np.int64)
     while True:
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
-        m = pair_search(anc, rad, sig, ntop, nbox, nrad, nsig, half, img_pos, 1.0, out_a, out_e,
-                        stack)
+        m = pair_search(anc, rad, ntop, nbox, nreach, half, img_pos, out_a, out_e, stack)
         if m <= cap:
             break
         cap = m + 1024

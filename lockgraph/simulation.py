@@ -9,7 +9,7 @@ import numpy as np
 from . import kernels as K
 from .engine import Engine
 from .errors import InputError
-from .overlaps import check_state
+from .overlaps import OVERLAP_TOLERANCE
 from .physics import Physics
 from .state import State
 
@@ -59,10 +59,13 @@ class Simulation:
         largest radius plus search radius below it).
     policy : "exact" | "paper" — parallel event selection (see ARCHITECTURE.md).
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).
+    copy : bool — with False the simulation takes over the state's arrays
+        instead of copying them (for systems near the memory limit); the State
+        passed in must not be used afterwards.
     """
 
     def __init__(self, state, physics, dt, *, threads=1, lock="graph", scale=4.0,
-                 policy="exact", skin=0.5, leaf_size=8, collapse_limit=10000):
+                 policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True):
         if not isinstance(state, State):
             raise InputError("state", f"must be a lockgraph.State, got {type(state).__name__}")
         if not isinstance(physics, Physics):
@@ -77,10 +80,16 @@ class Simulation:
             raise InputError("scale", f"must be a finite number > 0, got {scale!r}")
         self.scale = scale
         self.physics = physics
-        self.initial_overlap = check_state(state, physics.domain)
+        physics.domain.check_inside(state.pos, state.radius)
         self.compile_s = compile_kernels()
         self._engine = Engine(state, physics, dt, skin=skin, leaf_size=leaf_size,
-                              collapse_limit=collapse_limit)
+                              collapse_limit=collapse_limit, copy=copy)
+        worst, a, b, count = self._engine.initial_overlap(OVERLAP_TOLERANCE)
+        if worst > OVERLAP_TOLERANCE:
+            raise InputError("state.pos", f"particles {a} and {b} overlap by {worst:.3g} of their "
+                             f"contact distance ({count} overlapping pairs; tolerance "
+                             f"{OVERLAP_TOLERANCE:g})")
+        self.initial_overlap = worst
         self.dt = self._engine.dt
         self.threads_used = 1
         if self.threads > 1:
@@ -99,7 +108,7 @@ class Simulation:
         eng = self._engine
         for k in range(int(steps)):
             t0 = _time.perf_counter()
-            eng.step()
+            eng.step(check_end=k == steps - 1)
             self.wall_s += _time.perf_counter() - t0
             self.steps += 1
             if progress is not None:

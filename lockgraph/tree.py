@@ -3,31 +3,32 @@
 The tree is rebuilt every step over the *anchors* (particle positions at the
 start of the step).  Each node stores
 
-* ``ntop[k] = (left, right, start, end, parent)`` (int32): children (-1 for a
-  leaf), the half-open range of storage slots it covers, and its parent;
+* ``ntop[k] = (left, right, start, end, parent, axis)`` (int32): children (-1
+  for a leaf), the half-open range of storage slots it covers, its parent and
+  the axis it is split along;
 * ``nbox[k] = (xlo, ylo, zlo, xhi, yhi, zhi)`` (float64, metres): bounding box of
   the anchors below it;
-* ``nrad[k]``: largest particle radius below it (m);
-* ``nsig[k]``: largest *search radius* below it (m).  A particle's search radius
-  ``sig`` bounds how far it can move, in the frame that makes the step's
-  background motion vanish, between the step start and the step end.  It only
-  grows during a step (see ``raise_sigma``).
+* ``nreach[k]``: the largest *reach* below it (m).
+
+A particle's reach is ``sig + fr * radius``: ``sig`` (its search radius)
+bounds how far it can move, in the frame where the step's background motion
+vanishes, between the step start and the step end; ``fr >= 1`` accounts for the
+shear of that frame (``fr = 1`` without shear).  Two particles ``a`` and ``b``
+(``b`` in periodic image ``img``) can meet within the step only if::
+
+    |anc[a] - anc[b] - img_pos[img]| <= reach[a] + reach[b]
+
+Both searches here return exactly the pairs that satisfy it.  Reaches only
+grow during a step (see ``raise_reach``).
 
 Particles are stored in tree order: node ``k`` covers slots
 ``start..end-1``.  ``build`` returns the permutation that puts them there.
-
-Two particles ``a`` and ``b`` (``b`` in periodic image ``img``) can meet within
-the step only if::
-
-    |anc[a] - anc[b] - img_pos[img]| <= sig[a] + sig[b] + fr * (rad[a] + rad[b])
-
-where ``fr >= 1`` accounts for the shear of the frame (``fr = 1`` without
-shear).  Both searches here return exactly the pairs that satisfy it.
 """
 import numpy as np
 from ._jit import kernel
 
-LEFT, RIGHT, START, END, PARENT = 0, 1, 2, 3, 4
+LEFT, RIGHT, START, END, PARENT, AXIS = 0, 1, 2, 3, 4, 5
+NTOP = 6
 SELF_IMAGE = 13  # image index of the box itself: (kx, ky, kz) = (0, 0, 0)
 
 
@@ -136,6 +137,7 @@ def build(pos, leaf_size, perm, ntop, stack):
             axis = 2
         m = (s + e) >> 1
         _select(perm, pos, axis, s, e - 1, m)
+        ntop[nd, AXIS] = axis
         left = nnodes
         right = nnodes + 1
         nnodes += 2
@@ -160,12 +162,44 @@ def build(pos, leaf_size, perm, ntop, stack):
 
 
 @kernel
-def node_bounds(anc, rad, sig, ntop, nnodes, nbox, nrad, nsig):
-    """Fill box, max radius and max search radius of every node, bottom-up.
+def rebuild(pos, perm, ntop, nnodes):
+    """Re-sort particles into an existing topology (same ranges and split axes).
+
+    The node ranges depend only on N and the leaf size, so last step's tree
+    fits again once every node's two halves are re-split along its axis.
+    Storage is still in last step's order, so most nodes are split already: a
+    scan checks that and a selection runs only where a particle crossed.
+    Parents come before children in node order.
+    """
+    for nd in range(nnodes):
+        left = ntop[nd, LEFT]
+        if left < 0:
+            continue
+        s = ntop[nd, START]
+        e = ntop[nd, END]
+        m = ntop[left, END]
+        axis = ntop[nd, AXIS]
+        mx = -np.inf
+        for k in range(s, m):
+            v = pos[perm[k], axis]
+            if v > mx:
+                mx = v
+        mn = np.inf
+        for k in range(m, e):
+            v = pos[perm[k], axis]
+            if v < mn:
+                mn = v
+        if mx > mn:
+            _select(perm, pos, axis, s, e - 1, m)
+
+
+@kernel
+def node_bounds(anc, reach, ntop, nnodes, nbox, nreach):
+    """Fill box and max reach of every node, bottom-up.
 
     Children always have larger indices than their parent, so one reverse
-    sweep sees every child before its parent.  ``anc``, ``rad`` and ``sig`` are
-    in tree order.
+    sweep sees every child before its parent.  ``anc`` and ``reach`` are in
+    tree order.
     """
     for nd in range(nnodes - 1, -1, -1):
         left = ntop[nd, LEFT]
@@ -176,7 +210,6 @@ def node_bounds(anc, rad, sig, ntop, nnodes, nbox, nrad, nsig):
                 nbox[nd, a] = np.inf
                 nbox[nd, 3 + a] = -np.inf
             mr = 0.0
-            ms = 0.0
             for k in range(s, e):
                 for a in range(3):
                     v = anc[k, a]
@@ -184,19 +217,15 @@ def node_bounds(anc, rad, sig, ntop, nnodes, nbox, nrad, nsig):
                         nbox[nd, a] = v
                     if v > nbox[nd, 3 + a]:
                         nbox[nd, 3 + a] = v
-                if rad[k] > mr:
-                    mr = rad[k]
-                if sig[k] > ms:
-                    ms = sig[k]
-            nrad[nd] = mr
-            nsig[nd] = ms
+                if reach[k] > mr:
+                    mr = reach[k]
+            nreach[nd] = mr
         else:
             right = ntop[nd, RIGHT]
             for a in range(3):
                 nbox[nd, a] = min(nbox[left, a], nbox[right, a])
                 nbox[nd, 3 + a] = max(nbox[left, 3 + a], nbox[right, 3 + a])
-            nrad[nd] = max(nrad[left], nrad[right])
-            nsig[nd] = max(nsig[left], nsig[right])
+            nreach[nd] = max(nreach[left], nreach[right])
 
 
 @kernel(inline=True)
@@ -250,18 +279,17 @@ def point_gap2(nbox, nd, qx, qy, qz):
 
 
 @kernel(inline=True)
-def pair_reach_ok(anc, rad, sig, a, b, ox, oy, oz, fr):
+def pair_reach_ok(anc, reach, a, b, ox, oy, oz):
     """True if particles a and b (b shifted by o) may meet within the step."""
     dx = anc[a, 0] - anc[b, 0] - ox
     dy = anc[a, 1] - anc[b, 1] - oy
     dz = anc[a, 2] - anc[b, 2] - oz
-    reach = sig[a] + sig[b] + fr * (rad[a] + rad[b])
-    return dx * dx + dy * dy + dz * dz <= reach * reach
+    r = reach[a] + reach[b]
+    return dx * dx + dy * dy + dz * dz <= r * r
 
 
 @kernel
-def pair_search(anc, rad, sig, ntop, nbox, nrad, nsig, half_images, img_pos, fr,
-                out_a, out_e, stack):
+def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out_e, stack):
     """Two-argument (dual-tree) recursion from the root: all candidate pairs.
 
     For every image in ``half_images`` (the self image and one of each pair of
@@ -299,7 +327,7 @@ def pair_search(anc, rad, sig, ntop, nbox, nrad, nsig, half_images, img_pos, fr,
                     e = ntop[na, END]
                     for a in range(s, e):
                         for b in range(a + 1, e):
-                            if pair_reach_ok(anc, rad, sig, a, b, 0.0, 0.0, 0.0, fr):
+                            if pair_reach_ok(anc, reach, a, b, 0.0, 0.0, 0.0):
                                 if count < cap:
                                     out_a[count] = a
                                     out_e[count] = (b << 5) | img
@@ -314,20 +342,20 @@ def pair_search(anc, rad, sig, ntop, nbox, nrad, nsig, half_images, img_pos, fr,
                     stack[sp + 2, 1] = ra
                     sp += 3
                 continue
-            reach = nsig[na] + nsig[nb] + fr * (nrad[na] + nrad[nb])
-            if _box_gap2(nbox, na, nb, ox, oy, oz) > reach * reach:
+            r = nreach[na] + nreach[nb]
+            if _box_gap2(nbox, na, nb, ox, oy, oz) > r * r:
                 continue
             if la < 0 and lb < 0:
                 for a in range(ntop[na, START], ntop[na, END]):
                     # skip a at once if it is out of reach of the whole leaf nb
-                    ra = sig[a] + nsig[nb] + fr * (rad[a] + nrad[nb])
+                    ra = reach[a] + nreach[nb]
                     if point_gap2(nbox, nb, anc[a, 0] - ox, anc[a, 1] - oy,
                                   anc[a, 2] - oz) > ra * ra:
                         continue
                     for b in range(ntop[nb, START], ntop[nb, END]):
                         if a == b:
                             continue  # a particle never meets its own image
-                        if pair_reach_ok(anc, rad, sig, a, b, ox, oy, oz, fr):
+                        if pair_reach_ok(anc, reach, a, b, ox, oy, oz):
                             if count < cap:
                                 out_a[count] = a
                                 out_e[count] = (b << 5) | img
@@ -368,12 +396,18 @@ def find_leaf(ntop, slot):
 
 
 @kernel
-def raise_sigma(ntop, nsig, slot, value):
-    """Raise the search radius bound of every node above ``slot`` to ``value``."""
+def raise_reach(ntop, nreach, slot, value):
+    """Raise the max reach of every node above ``slot`` to at least ``value``."""
     nd = find_leaf(ntop, slot)
-    while nd >= 0 and nsig[nd] < value:
-        nsig[nd] = value
+    while nd >= 0 and nreach[nd] < value:
+        nreach[nd] = value
         nd = ntop[nd, PARENT]
+
+
+@kernel
+def identity(perm):
+    for k in range(perm.shape[0]):
+        perm[k] = k
 
 
 @kernel

@@ -3,9 +3,9 @@
 One class of checks (``PairSearchChecks``) runs on every domain and size
 distribution.  A pair (a, b, image) is a candidate when
 
-    |anc[a] - anc[b] - img_pos[image]| <= sig[a] + sig[b] + fr (rad[a] + rad[b])
+    |anc[a] - anc[b] - img_pos[image]| <= reach[a] + reach[b]
 
-Soundness: every pair the tree reports satisfies it.  Completeness: every pair
+with reach = sig + fr * rad.  Soundness: every pair the tree reports satisfies it.  Completeness: every pair
 brute force finds is reported.  Each unordered pair is reported once.
 """
 import numpy as np
@@ -21,19 +21,20 @@ def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
     """Candidate pairs from the tree, as a set of (lower id, higher id, image from lower)."""
     n = len(pos)
     perm = np.arange(n, dtype=np.int32)
-    ntop = np.zeros((count_nodes(n, leaf), 5), np.int32)
+    ntop = np.zeros((count_nodes(n, leaf), 6), np.int32)
     nn = build(pos.copy(), leaf, perm, ntop, np.zeros(256, np.int64))
     assert nn == count_nodes(n, leaf)
     assert sorted(perm) == list(range(n))  # a permutation
-    anc, r, s = pos[perm], rad[perm], sig[perm]
-    nbox, nrad, nsig = np.zeros((nn, 6)), np.zeros(nn), np.zeros(nn)
-    node_bounds(anc, r, s, ntop, nn, nbox, nrad, nsig)
+    anc = pos[perm]
+    reach = (sig + fr * rad)[perm]
+    nbox, nreach = np.zeros((nn, 6)), np.zeros(nn)
+    node_bounds(anc, reach, ntop, nn, nbox, nreach)
     img_pos, img_vel, half, full = domain.images(time)
     cap = 16
     while True:
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
-        m = pair_search(anc, r, s, ntop, nbox, nrad, nsig, half, img_pos, fr, out_a, out_e,
+        m = pair_search(anc, reach, ntop, nbox, nreach, half, img_pos, out_a, out_e,
                         np.zeros((4096, 2), np.int64))
         if m <= cap:
             break
@@ -56,8 +57,8 @@ def brute_pairs(pos, rad, sig, domain, time=0.0, fr=1.0):
     for img in full:
         d = pos[:, None, :] - pos[None, :, :] - img_pos[img]
         dist2 = (d ** 2).sum(-1)
-        reach = sig[:, None] + sig[None, :] + fr * (rad[:, None] + rad[None, :])
-        ok = dist2 <= reach ** 2
+        reach = sig + fr * rad
+        ok = dist2 <= (reach[:, None] + reach[None, :]) ** 2
         for a, b in zip(*np.nonzero(ok)):
             if a < b:
                 out.add((int(a), int(b), int(img)))
