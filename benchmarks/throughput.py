@@ -6,8 +6,9 @@
   collisions per second of wall time on one core.  Reference point: a fast C++
   event-driven code reaches 3.9e5-9.5e5 collisions per CPU-second on this kind
   of machine; target here >= 4e5 at N = 32,000.
-* ring (late state) and dish (settled bed): collisions and particle-steps per
-  second.
+* ring and ring_moonlet (late states), dish and dish_marble (settled bed):
+  collisions and particle-steps per second (the big body must not slow the
+  small ones: compare the pairs).
 * memory: peak resident memory per particle running ``ring`` at N = 1e6 (target
   <= 200 bytes), measured in a child process as (peak RSS - RSS after imports
   and compilation) / N, the state loaded from a file and handed to the
@@ -116,15 +117,19 @@ def main():
         say(f"preparing gas N={n} (equilibrating)")
         cases[f"gas eta=0.45 N={n}"] = (scenarios.load("gas", "late", n=n,
                                                          params={"late_time": 5.0}), 3)
-    say("preparing ring (late) and dish (settled)")
+    say("preparing ring and ring_moonlet (late), dish and dish_marble (settled)")
     cases["ring late N=20000"] = (scenarios.load("ring", "late", n=20000, progress=say), 5)
+    cases["ring_moonlet late N=20000"] = (scenarios.load("ring_moonlet", "late", n=20000,
+                                                         progress=say), 5)
     cases["dish settled N=2000"] = (scenarios.load("dish", "late", n=2000, progress=say), 20)
+    cases["dish_marble settled N=2001"] = (scenarios.load("dish_marble", "late", n=2001,
+                                                          progress=say), 20)
     runs = timed_runs(cases, args.repeats, seconds)
-    print(f"\n{'case':24s} {'collisions/s (best)':>20s} {'spread':>9s} {'particle-steps/s':>17s}")
+    print(f"\n{'case':28s} {'collisions/s (best)':>20s} {'spread':>9s} {'particle-steps/s':>17s}")
     for name, vals in runs.items():
         c = [v[0] for v in vals]
         ps = [v[1] for v in vals]
-        print(f"{name:24s} {max(c):20.3g} {min(c) / max(c):9.2f} {max(ps):17.3g}")
+        print(f"{name:28s} {max(c):20.3g} {min(c) / max(c):9.2f} {max(ps):17.3g}")
         results[name] = {"collisions_per_s": max(c), "collisions_per_s_all": c,
                          "particle_steps_per_s": max(ps)}
     best = results["gas eta=0.45 N=32000"]["collisions_per_s"]

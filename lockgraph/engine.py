@@ -43,7 +43,7 @@ class Engine:
     state : State
     physics : Physics
     dt : float, s — step length (> 0).
-    skin : float — extra search radius, in units of the rms speed times dt.
+    skin : float — extra search radius, in units of the median speed times dt.
     leaf_size : int — particles per kD-tree leaf.
     rebuild_every : int — build the tree from scratch every this many steps;
         in between, particles are re-sorted into the last tree's nodes.
@@ -83,6 +83,8 @@ class Engine:
                              f"need 1.5*omega*dt < 0.25 (dt < {0.25 / (1.5 * hill.omega):.6g} s)")
         self._load(state, copy)
         self.totals = np.zeros(K.NSTAT)
+        self.search_visits = 0.0  # node pairs visited by the pair searches so far
+        self.search_tests = 0.0   # particle pairs tested by them
         self.max_overlap = 0.0
         self.steps_done = 0
         self.step_stats = None
@@ -111,6 +113,8 @@ class Engine:
         self.anc = np.zeros((n, 3))
         self.reach = np.zeros(n)
         self.top = np.zeros(2)
+        self.search_work = np.zeros(2)
+        self.speed_sample = np.zeros(min(n, 1024) if n else 1)
         self.cis = np.zeros(n, np.int32)
         self.work = np.zeros(256, np.int64)
         self.stack2 = np.zeros((4096, 2), np.int64)
@@ -250,7 +254,10 @@ class Engine:
         if touching_only:
             self.reach[:] = self.rad
         else:
-            K.compute_reach(self.pos, self.vel, self.rad, self.reach, self.par, self.skin, self.top)
+            K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
+            typical = float(np.median(self.speed_sample))
+            extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
+            K.compute_reach(self.pos, self.vel, self.rad, self.reach, self.par, extra, self.top)
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
                 raise StepTooLargeError(
                     f"dt={self.dt}: two particles' reaches ({self.top[0]:.4g} and "
@@ -278,7 +285,7 @@ class Engine:
         node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         while True:
             npairs = pair_search(self.anc, self.reach, self.ntop, self.nbox, self.nreach, half,
-                                 img_pos, self.out_a, self.out_e, self.stack2)
+                                 img_pos, self.out_a, self.out_e, self.stack2, self.search_work)
             if npairs < 0:
                 raise SimulationError("pair search deeper than its work stack")
             if npairs <= self.pair_cap:
@@ -288,6 +295,8 @@ class Engine:
             self.out_e = np.zeros(self.pair_cap, np.int32)
             self.nent = np.zeros(2 * self.pair_cap, np.int32)
         self.npairs = npairs
+        self.search_visits += self.search_work[0]
+        self.search_tests += self.search_work[1]
         build_csr(n, npairs, self.out_a, self.out_e, self.noff, self.nent)
         K.reset_step(self.tl, self.cis, self.xhead, self.ctr)
 

@@ -6,7 +6,9 @@ which is the tree order of the current step):
 * ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state (``tlast``
   is empty unless the physics has a collapse guard; ``ids`` int32); inside
   the drift phase ``pos``/``vel`` are *frame* coordinates (free-falling frame
-  when there is gravity), ``tl`` the local step time of ``pos``.
+  when there is gravity): a particle is at ``pos + vel * t`` at step time t
+  (``pos`` is its position extrapolated to the step start, reset whenever its
+  velocity changes) and ``tl`` is the step time of its last change.
 * ``step = (anc, reach, cis, work)`` — anchors (step-start positions, (N,3)),
   reaches (N,) (search radius + fr * radius, see ``tree``), collisions of each
   particle in this step (N,) int32, and an int64 work array (a search stack
@@ -56,13 +58,9 @@ WALL_KEY_CYL = (1 << 62) + 1
 
 
 @kernel(inline=True)
-def advance(pos, vel, tl, i, t):
-    """Move particle i along its straight frame trajectory to step time t."""
-    d = t - tl[i]
-    pos[i, 0] += vel[i, 0] * d
-    pos[i, 1] += vel[i, 1] * d
-    pos[i, 2] += vel[i, 2] * d
-    tl[i] = t
+def position_at(pos, vel, i, t):
+    """Frame position (x, y, z) of particle i at step time t."""
+    return (pos[i, 0] + vel[i, 0] * t, pos[i, 1] + vel[i, 1] * t, pos[i, 2] + vel[i, 2] * t)
 
 
 @kernel(inline=True)
@@ -82,7 +80,7 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
         e = nent[k]
         j = e >> 5
         img = e & 31
-        t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
+        t = pair_time(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
         if t <= best and t < INF:
             key = ids[j] * 32 + img
             if t < best or key < bkey:
@@ -95,7 +93,7 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
         e = xent[x]
         j = e >> 5
         img = e & 31
-        t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
+        t = pair_time(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end)
         if t <= best and t < INF:
             key = ids[j] * 32 + img
             if t < best or key < bkey:
@@ -164,10 +162,10 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
     dt = par[P_DT]
     s = par[P_SHEAR]
     fr = par[P_FR]
-    x = pos[k, 0]
+    x = pos[k, 0] + vel[k, 0] * t
     dx = x - anc[k, 0]
-    dy = (pos[k, 1] + s * t * x) - anc[k, 1]  # sheared-frame coordinate
-    dz = pos[k, 2] - anc[k, 2]
+    dy = ((pos[k, 1] + vel[k, 1] * t) + s * t * x) - anc[k, 1]  # sheared-frame coordinate
+    dz = (pos[k, 2] + vel[k, 2] * t) - anc[k, 2]
     uy = vel[k, 1] + s * x  # velocity relative to the shear flow
     speed = math.sqrt(vel[k, 0] * vel[k, 0] + uy * uy + vel[k, 2] * vel[k, 2])
     sig = math.sqrt(dx * dx + dy * dy + dz * dz) + (dt - t) * speed * (1.0 + s * dt)
@@ -226,11 +224,11 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
     par, ipar, img_pos, img_vel, img_all = cfg
     journal(i, vel, tlast, cis, jour, ctr)
     journal(j, vel, tlast, cis, jour, ctr)
-    advance(pos, vel, tl, i, t)
-    advance(pos, vel, tl, j, t)
-    dx = pos[i, 0] - pos[j, 0] - (img_pos[img, 0] + img_vel[img, 0] * t)
-    dy = pos[i, 1] - pos[j, 1] - (img_pos[img, 1] + img_vel[img, 1] * t)
-    dz = pos[i, 2] - pos[j, 2] - (img_pos[img, 2] + img_vel[img, 2] * t)
+    xi0, xi1, xi2 = position_at(pos, vel, i, t)
+    xj0, xj1, xj2 = position_at(pos, vel, j, t)
+    dx = xi0 - xj0 - (img_pos[img, 0] + img_vel[img, 0] * t)
+    dy = xi1 - xj1 - (img_pos[img, 1] + img_vel[img, 1] * t)
+    dz = xi2 - xj2 - (img_pos[img, 2] + img_vel[img, 2] * t)
     dist = math.sqrt(dx * dx + dy * dy + dz * dz)
     nx = dx / dist
     ny = dy / dist
@@ -259,6 +257,15 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         vel[j, 0] -= aj * nx
         vel[j, 1] -= aj * ny
         vel[j, 2] -= aj * nz
+        # new false positions: through the contact point along the new velocities
+        pos[i, 0] = xi0 - vel[i, 0] * t
+        pos[i, 1] = xi1 - vel[i, 1] * t
+        pos[i, 2] = xi2 - vel[i, 2] * t
+        pos[j, 0] = xj0 - vel[j, 0] * t
+        pos[j, 1] = xj1 - vel[j, 1] * t
+        pos[j, 2] = xj2 - vel[j, 2] * t
+        tl[i] = t
+        tl[j] = t
         ncoll[i] += 1
         ncoll[j] += 1
         cis[i] += 1
@@ -301,7 +308,7 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
     evt, evp, evc, tour_t, tour_s = evq
     par, ipar, img_pos, img_vel, img_all = cfg
     journal(i, vel, tlast, cis, jour, ctr)
-    advance(pos, vel, tl, i, t)
+    x0, x1, x2 = position_at(pos, vel, i, t)
     # Walls neither follow nor reset the collapse guard's clock: a grain resting
     # on the floor touches it every few tc, and if those touches made its next
     # impacts elastic a bed would never lose its horizontal motion.  A wall ends
@@ -319,9 +326,9 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
             st[S_FLOORIMP] += mass[i] * (w2 - w)
             hit = True
     else:
-        rho = math.sqrt(pos[i, 0] * pos[i, 0] + pos[i, 1] * pos[i, 1])
-        nx = pos[i, 0] / rho
-        ny = pos[i, 1] / rho
+        rho = math.sqrt(x0 * x0 + x1 * x1)
+        nx = x0 / rho
+        ny = x1 / rho
         vn = vel[i, 0] * nx + vel[i, 1] * ny
         if vn > 0.0:
             e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], vn)
@@ -330,6 +337,10 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
             st[S_CYLIMP] += mass[i] * (1.0 + e) * vn
             hit = True
     if hit:
+        pos[i, 0] = x0 - vel[i, 0] * t
+        pos[i, 1] = x1 - vel[i, 1] * t
+        pos[i, 2] = x2 - vel[i, 2] * t
+        tl[i] = t
         ncoll[i] += 1
         cis[i] += 1
         st[S_WALL] += 1
@@ -401,7 +412,7 @@ def init_events(parts, nbrs, evq, cfg, st):
                 ov = (contact - math.sqrt(d2)) / contact
                 if ov > st[S_MAXOV]:
                     st[S_MAXOV] = ov
-            t = pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, contact, 0.0, t_end)
+            t = pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, 0.0, t_end)
             if t < INF:
                 _offer(i, t, e, ids[j] * 32 + img, evt, evp, evc, ids, ncoll)
                 _offer(j, t, (i << 5) | (26 - img), ids[i] * 32 + 26 - img, evt, evp, evc,
@@ -468,33 +479,40 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
 
 
 @kernel
-def compute_reach(pos, vel, rad, reach, par, skin, top):
+def sample_speeds(pos, vel, par, out):
+    """Speeds relative to the shear flow of every (N // len(out))-th particle."""
+    n = pos.shape[0]
+    m = out.shape[0]
+    stride = max(1, n // m)
+    s = par[P_SHEAR]
+    for q in range(m):
+        i = min(q * stride, n - 1)
+        uy = vel[i, 1] + s * pos[i, 0]
+        out[q] = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
+
+
+@kernel
+def compute_reach(pos, vel, rad, reach, par, extra, top):
     """Step-start reaches: search radius plus fr times the radius.
 
-    The search radius is sig = (|u| (1 + s dt) + skin * u_rms) dt + g dt^2 / 2,
-    with u the velocity relative to the shear flow: the particle's own straight
-    path plus a skin for later speed-ups.  Correctness does not depend on the
-    skin (a particle that outruns its reach widens it and searches again); it
-    only trades candidate-list length against such searches.  ``top`` (2,)
-    receives the two largest reaches.
+    The search radius is sig = |u| (1 + s dt) dt + extra, with u the velocity
+    relative to the shear flow: the particle's own straight path plus a skin
+    ``extra`` for later speed-ups (the engine uses skin * median speed * dt
+    + g dt^2 / 2: a median, so a few fast particles do not widen everyone's
+    search).  Correctness does not depend on the skin (a particle that outruns
+    its reach widens it and searches again); it only trades candidate-list
+    length against such searches.  ``top`` (2,) receives the two largest reaches.
     """
     n = pos.shape[0]
     dt = par[P_DT]
     s = par[P_SHEAR]
-    g0 = par[P_G]
     fr = par[P_FR]
-    total = 0.0
-    for i in range(n):
-        uy = vel[i, 1] + s * pos[i, 0]
-        sp = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
-        reach[i] = sp
-        total += sp * sp
-    urms = math.sqrt(total / n) if n > 0 else 0.0
-    extra = skin * urms * dt + 0.5 * g0 * dt * dt
     top[0] = 0.0
     top[1] = 0.0
     for i in range(n):
-        r = (reach[i] * (1.0 + s * dt) * dt + extra) + fr * rad[i]
+        uy = vel[i, 1] + s * pos[i, 0]
+        sp = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
+        r = (sp * (1.0 + s * dt) * dt + extra) + fr * rad[i]
         reach[i] = r
         if r > top[0]:
             top[1] = top[0]
@@ -514,12 +532,12 @@ def reset_step(tl, cis, xhead, ctr):
 
 @kernel
 def drift_all(pos, vel, tl, t):
-    """Move every particle along its frame trajectory to step time t."""
+    """Move every particle along its frame trajectory to step time t (pos becomes
+    the real position there)."""
     for i in range(pos.shape[0]):
-        d = t - tl[i]
-        pos[i, 0] += vel[i, 0] * d
-        pos[i, 1] += vel[i, 1] * d
-        pos[i, 2] += vel[i, 2] * d
+        pos[i, 0] += vel[i, 0] * t
+        pos[i, 1] += vel[i, 1] * t
+        pos[i, 2] += vel[i, 2] * t
         tl[i] = t
 
 

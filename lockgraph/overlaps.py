@@ -58,7 +58,8 @@ def max_overlap(state, domain):
     while True:
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
-        m = pair_search(anc, rad, ntop, nbox, nreach, half, img_pos, out_a, out_e, stack)
+        m = pair_search(anc, rad, ntop, nbox, nreach, half, img_pos, out_a, out_e, stack,
+                        np.zeros(2))
         if m <= cap:
             break
         cap = m + 1024

@@ -1,15 +1,17 @@
 """Contact-time functions: pair, floor and cylinder wall.
 
 Inside a step every particle moves on a straight line in the step's frame
-(see ``engine``): ``pos[i]`` is its frame position at its local time
-``tl[i]`` (seconds since the step start) and ``vel[i]`` its frame velocity.
-Periodic image ``img`` of a particle is displaced by
-``img_pos[img] + img_vel[img] * t`` at step time ``t``.
+(see ``engine``): at step time t it is at ``pos[i] + vel[i] * t``, so ``pos``
+holds its position extrapolated back to the step start along its current
+velocity (a "false position", set again whenever the velocity changes) and
+``vel[i]`` its frame velocity.  Periodic image ``img`` of a particle is
+displaced by ``img_pos[img] + img_vel[img] * t``.
 
 Every function returns the step time of the first contact that is not earlier
 than ``t_now``, or ``inf`` if there is none before ``t_end``.  A pair that
-already overlaps while approaching collides at ``t_now``.  The algebra is
-written so that swapping the two particles gives bitwise the same time.
+overlaps at ``t_now`` while approaching collides at ``t_now``.  The pair
+algebra is antisymmetric to the bit: swapping the two particles gives the same
+time, whoever asks and whenever.
 """
 import math
 
@@ -19,54 +21,45 @@ INF = math.inf
 
 
 @kernel(inline=True)
-def pair_time(pos, vel, tl, i, j, img, img_pos, img_vel, contact, t_now, t_end):
+def pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end):
     """First contact of i with image ``img`` of j (``contact`` = r_i + r_j)."""
-    if i > j:  # canonical order: the same bits whichever particle asks
-        i, j = j, i
-        img = 26 - img
-    ti = tl[i]
-    tj = tl[j]
-    tr = ti if ti > tj else tj
-    di = tr - ti
-    dj = tr - tj
-    dx = (pos[i, 0] + vel[i, 0] * di) - (pos[j, 0] + vel[j, 0] * dj) - (img_pos[img, 0] + img_vel[img, 0] * tr)
-    dy = (pos[i, 1] + vel[i, 1] * di) - (pos[j, 1] + vel[j, 1] * dj) - (img_pos[img, 1] + img_vel[img, 1] * tr)
-    dz = (pos[i, 2] + vel[i, 2] * di) - (pos[j, 2] + vel[j, 2] * dj) - (img_pos[img, 2] + img_vel[img, 2] * tr)
+    dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
+    dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
+    dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
     ux = vel[i, 0] - vel[j, 0] - img_vel[img, 0]
     uy = vel[i, 1] - vel[j, 1] - img_vel[img, 1]
     uz = vel[i, 2] - vel[j, 2] - img_vel[img, 2]
     b = dx * ux + dy * uy + dz * uz
     if b >= 0.0:
-        return INF  # not approaching
+        return INF  # closest approach at or before the step start: never again
     a = ux * ux + uy * uy + uz * uz
     c = dx * dx + dy * dy + dz * dz - contact * contact
-    if c <= 0.0:
-        tau = 0.0  # touching or overlapping while approaching: collide now
-    else:
+    if c > 0.0:
         disc = b * b - a * c
         if disc < 0.0:
-            return INF  # closest approach misses
-        tau = c / (math.sqrt(disc) - b)  # stable root: no cancellation
-    t = tr + tau
-    if t < t_now:
-        t = t_now
-    if t >= t_end:
-        return INF
-    return t
+            return INF  # the paths miss
+        t = c / (math.sqrt(disc) - b)  # entering root, in the form that does not cancel
+        if t >= t_now:
+            return t if t < t_end else INF
+    # entered before t_now: overlapping now if still approaching (t_now < -b / a)
+    if t_now * a < -b and t_now < t_end:
+        return t_now
+    return INF
 
 
 @kernel
 def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
     """First contact of i with the floor z = 0 under gravity g0 (m/s^2, downward).
 
-    The frame is the free-falling one: real height z = pos_z - g0 t^2 / 2 and
-    real vertical velocity w = vel_z - g0 t.  The contact solves
-    ``h + w tau - g0 tau^2 / 2 = 0`` with h the gap; the root is taken in the
-    form that does not cancel.
+    The frame is the free-falling one: real height z = pos_z + vel_z t - g0 t^2 / 2
+    and real vertical velocity w = vel_z - g0 t.  The contact solves
+    ``h + w tau - g0 tau^2 / 2 = 0`` from the time ``tl[i]`` the particle's
+    current path began (so the result does not depend on when it is asked),
+    with h the gap there; the root is taken in the form that does not cancel.
     """
-    ti = tl[i]
-    w = vel[i, 2] - g0 * ti
-    h = pos[i, 2] - 0.5 * g0 * ti * ti - radius
+    t0 = tl[i]
+    w = vel[i, 2] - g0 * t0
+    h = (pos[i, 2] + vel[i, 2] * t0) - 0.5 * g0 * t0 * t0 - radius
     if h < 0.0:
         h = 0.0  # rounding below contact: treat as touching
     if g0 == 0.0:
@@ -79,7 +72,7 @@ def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
             tau = (w + sq) / g0
         else:
             tau = 2.0 * h / (sq - w)
-    t = ti + tau
+    t = t0 + tau
     if t < t_now:
         t = t_now
     if t >= t_end:
@@ -89,15 +82,16 @@ def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
 
 @kernel
 def cylinder_time(pos, vel, tl, i, radius, rcyl, t_now, t_end):
-    """First contact of i with the inside of the vertical cylinder of radius rcyl."""
-    ti = tl[i]
-    px = pos[i, 0]
-    py = pos[i, 1]
+    """First contact of i with the inside of the vertical cylinder of radius rcyl
+    (solved from ``tl[i]``, as ``floor_time``)."""
+    t0 = tl[i]
     ux = vel[i, 0]
     uy = vel[i, 1]
     a = ux * ux + uy * uy
     if a == 0.0:
         return INF
+    px = pos[i, 0] + ux * t0
+    py = pos[i, 1] + uy * t0
     b = px * ux + py * uy
     reach = rcyl - radius
     c = px * px + py * py - reach * reach
@@ -112,7 +106,7 @@ def cylinder_time(pos, vel, tl, i, radius, rcyl, t_now, t_end):
             tau = -c / (b + sq)
         else:
             tau = (sq - b) / a
-    t = ti + tau
+    t = t0 + tau
     if t < t_now:
         t = t_now
     if t >= t_end:

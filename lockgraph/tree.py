@@ -289,7 +289,8 @@ def pair_reach_ok(anc, reach, a, b, ox, oy, oz):
 
 
 @kernel
-def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out_e, stack):
+def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out_e, stack,
+                work):
     """Two-argument (dual-tree) recursion from the root: all candidate pairs.
 
     For every image in ``half_images`` (the self image and one of each pair of
@@ -300,9 +301,13 @@ def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out
     ``len(out_a)`` are stored and the caller retries with larger buffers.
     ``stack`` is an (M, 2) int64 work array; -1 is returned if it was too short
     (depth-first traversal needs about three entries per tree level).
+    ``work`` (2,) float64 receives the node pairs visited and the particle
+    pairs tested (the search's cost, independent of timing).
     """
     cap = out_a.shape[0]
     count = 0
+    visits = 0
+    tests = 0
     for q in range(half_images.shape[0]):
         img = half_images[q]
         ox = img_pos[img, 0]
@@ -317,6 +322,7 @@ def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out
             sp -= 1
             na = stack[sp, 0]
             nb = stack[sp, 1]
+            visits += 1
             la = ntop[na, LEFT]
             lb = ntop[nb, LEFT]
             if sp + 3 > stack.shape[0]:
@@ -325,6 +331,7 @@ def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out
                 if la < 0:
                     s = ntop[na, START]
                     e = ntop[na, END]
+                    tests += (e - s) * (e - s - 1) // 2
                     for a in range(s, e):
                         for b in range(a + 1, e):
                             if pair_reach_ok(anc, reach, a, b, 0.0, 0.0, 0.0):
@@ -352,6 +359,7 @@ def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out
                     if point_gap2(nbox, nb, anc[a, 0] - ox, anc[a, 1] - oy,
                                   anc[a, 2] - oz) > ra * ra:
                         continue
+                    tests += ntop[nb, END] - ntop[nb, START]
                     for b in range(ntop[nb, START], ntop[nb, END]):
                         if a == b:
                             continue  # a particle never meets its own image
@@ -379,6 +387,8 @@ def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out
                 stack[sp + 1, 0] = na
                 stack[sp + 1, 1] = ntop[nb, RIGHT]
             sp += 2
+    work[0] = visits
+    work[1] = tests
     return count
 
 

@@ -53,19 +53,16 @@ class Reference:
 
     # ---- predictions ---------------------------------------------------------
     def _pair_row(self, i, t_now):
-        """Contact times of i with every particle j in every image: shape (N, K)."""
-        pos, vel, tl = self.pos, self.vel, self.tl
+        """Contact times of i with every particle j in every image: shape (N, K).
+
+        Positions are false positions (extrapolated to the step start along the
+        current velocity), as in the engine."""
+        pos, vel = self.pos, self.vel
         ip, iv = self.img_pos[self.imgs], self.img_vel[self.imgs]  # (K,3)
-        tr = np.maximum(tl[i], tl)[:, None]  # (N,1)
-        di = tr - tl[i]
-        dj = tr - tl[:, None]
         d = []
         u = []
         for a in range(3):
-            A = pos[i, a] + vel[i, a] * di
-            B = pos[:, a][:, None] + vel[:, a][:, None] * dj
-            C = ip[None, :, a] + iv[None, :, a] * tr
-            d.append((A - B) - C)
+            d.append((pos[i, a] - pos[:, a])[:, None] - ip[None, :, a])
             u.append((vel[i, a] - vel[:, a])[:, None] - iv[None, :, a])
         dx, dy, dz = d
         ux, uy, uz = u
@@ -75,18 +72,21 @@ class Reference:
             a2 = ux * ux + uy * uy + uz * uz
             c = dx * dx + dy * dy + dz * dz - contact * contact
             disc = b * b - a2 * c
-            tau = np.where(c <= 0.0, 0.0, c / (np.sqrt(np.maximum(disc, 0.0)) - b))
-            t = tr + tau
-        t = np.where((b >= 0.0) | ((c > 0.0) & (disc < 0.0)), np.inf, t)
-        t = np.maximum(t, t_now)
-        t = np.where(t >= self.dt, np.inf, t)
+            enter = c / (np.sqrt(np.maximum(disc, 0.0)) - b)
+        t = np.full(dx.shape, np.inf)
+        ahead = (b < 0.0) & (c > 0.0) & (disc >= 0.0) & (enter >= t_now)
+        t[ahead] = np.where(enter[ahead] < self.dt, enter[ahead], np.inf)
+        # entered before now (or overlapping at the start): collide now while approaching
+        now = (b < 0.0) & ~ahead & ~((c > 0.0) & (disc < 0.0)) & (t_now * a2 < -b) \
+            & (t_now < self.dt)
+        t[now] = t_now
         t[i, :] = np.inf  # a particle never meets itself or its images
         return t
 
     def _floor(self, i, t_now):
-        ti = self.tl[i]
-        w = self.vel[i, 2] - self.g0 * ti
-        h = self.pos[i, 2] - 0.5 * self.g0 * ti * ti - self.rad[i]
+        t0 = self.tl[i]
+        w = self.vel[i, 2] - self.g0 * t0
+        h = (self.pos[i, 2] + self.vel[i, 2] * t0) - 0.5 * self.g0 * t0 * t0 - self.rad[i]
         if h < 0.0:
             h = 0.0
         if self.g0 == 0.0:
@@ -96,16 +96,17 @@ class Reference:
         else:
             sq = math.sqrt(w * w + 2.0 * self.g0 * h)
             tau = (w + sq) / self.g0 if w >= 0.0 else 2.0 * h / (sq - w)
-        t = max(ti + tau, t_now)
+        t = max(t0 + tau, t_now)
         return t if t < self.dt else math.inf
 
     def _cylinder(self, i, t_now):
-        ti = self.tl[i]
-        px, py = self.pos[i, 0], self.pos[i, 1]
         ux, uy = self.vel[i, 0], self.vel[i, 1]
         a = ux * ux + uy * uy
         if a == 0.0:
             return math.inf
+        t0 = self.tl[i]
+        px = self.pos[i, 0] + ux * t0
+        py = self.pos[i, 1] + uy * t0
         b = px * ux + py * uy
         reach = self.physics.domain.radius - self.rad[i]
         c = px * px + py * py - reach * reach
@@ -117,7 +118,7 @@ class Reference:
         else:
             sq = math.sqrt(b * b - a * c)
             tau = -c / (b + sq) if b > 0.0 else (sq - b) / a
-        t = max(ti + tau, t_now)
+        t = max(t0 + tau, t_now)
         return t if t < self.dt else math.inf
 
     def _predict(self, i, t_now):
@@ -157,7 +158,7 @@ class Reference:
         self.imgs = np.array(sorted(full))
         K = len(self.imgs)
         self.kimg = {int(img): q for q, img in enumerate(self.imgs)}
-        self.tl = np.zeros(self.n)
+        self.tl = np.zeros(self.n)  # step time each particle's current path began
         self.T = np.full((self.n, self.n, K), np.inf)
         self.W = np.full((self.n, 2), np.inf)
         for i in range(self.n):
@@ -174,8 +175,7 @@ class Reference:
             else:
                 self._collide_wall(a, FLOOR if b == 0 else CYLINDER, t)
                 self._predict(a, t)
-        for i in range(self.n):
-            self._advance(i, self.dt)
+        self.pos += self.vel * self.dt
         if self.g0 != 0.0:
             self.pos[:, 2] -= 0.5 * self.g0 * self.dt * self.dt
             self.vel[:, 2] -= self.g0 * self.dt
@@ -185,16 +185,18 @@ class Reference:
             kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
         self.steps_done += 1
 
-    def _advance(self, i, t):
-        d = t - self.tl[i]
-        self.pos[i] += self.vel[i] * d
+    def _at(self, i, t):
+        return [self.pos[i, a] + self.vel[i, a] * t for a in range(3)]
+
+    def _set(self, i, x, t):
+        for a in range(3):
+            self.pos[i, a] = x[a] - self.vel[i, a] * t
         self.tl[i] = t
 
     def _collide_pair(self, i, j, img, t):
-        self._advance(i, t)
-        self._advance(j, t)
+        xi, xj = self._at(i, t), self._at(j, t)
         ip, iv = self.img_pos[img], self.img_vel[img]
-        d = [self.pos[i, a] - self.pos[j, a] - (ip[a] + iv[a] * t) for a in range(3)]
+        d = [xi[a] - xj[a] - (ip[a] + iv[a] * t) for a in range(3)]
         dist = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         nrm = [x / dist for x in d]
         vn = ((self.vel[i, 0] - self.vel[j, 0] - iv[0]) * nrm[0]
@@ -213,6 +215,8 @@ class Reference:
         for a in range(3):
             self.vel[i, a] += ai * nrm[a]
             self.vel[j, a] -= aj * nrm[a]
+        self._set(i, xi, t)
+        self._set(j, xj, t)
         self.ncoll[i] += 1
         self.ncoll[j] += 1
         self.tlast[i] = now
@@ -220,7 +224,7 @@ class Reference:
         self.events.append((self.steps_done, t, i, j, img))
 
     def _collide_wall(self, i, wall, t):
-        self._advance(i, t)
+        x = self._at(i, t)
         hit = False
         if wall == FLOOR:
             w = self.vel[i, 2] - self.g0 * t
@@ -230,8 +234,8 @@ class Reference:
                 self.vel[i, 2] = w2 + self.g0 * t
                 hit = True
         else:
-            rho = math.sqrt(self.pos[i, 0] ** 2 + self.pos[i, 1] ** 2)
-            nx, ny = self.pos[i, 0] / rho, self.pos[i, 1] / rho
+            rho = math.sqrt(x[0] * x[0] + x[1] * x[1])
+            nx, ny = x[0] / rho, x[1] / rho
             vn = self.vel[i, 0] * nx + self.vel[i, 1] * ny
             if vn > 0.0:
                 e = _coefficient(self.law, vn)
@@ -239,6 +243,7 @@ class Reference:
                 self.vel[i, 1] -= (1.0 + e) * vn * ny
                 hit = True
         if hit:
+            self._set(i, x, t)
             self.ncoll[i] += 1
             self.events.append((self.steps_done, t, i, wall, 13))
 

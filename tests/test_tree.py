@@ -35,7 +35,7 @@ def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
         m = pair_search(anc, reach, ntop, nbox, nreach, half, img_pos, out_a, out_e,
-                        np.zeros((4096, 2), np.int64))
+                        np.zeros((4096, 2), np.int64), np.zeros(2))
         if m <= cap:
             break
         cap = m
