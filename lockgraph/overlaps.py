@@ -1,40 +1,15 @@
 """Checks of a state against its domain: inside the boundaries, no overlapping pair."""
-import math
-
 import numpy as np
 
-from ._jit import kernel
 from .errors import InputError
+from .kernels import overlap_report
+from .neighbors import build_csr
 from .tree import build, count_nodes, node_bounds, pair_search
 
 # Relative overlap (contact - distance)/contact accepted in an input state.  The
 # engine's own states carry overlaps of order 1e-15 (rounding at contact), so
 # 1e-9 separates rounding from genuinely overlapping input by six orders.
 OVERLAP_TOLERANCE = 1e-9
-
-
-@kernel
-def _pair_overlaps(pos, rad, out_a, out_e, npairs, img_pos, res_ov, res_a, res_b):
-    """Largest relative overlap among candidate pairs and how many exceed tol."""
-    worst = 0.0
-    count = 0
-    for k in range(npairs):
-        a = out_a[k]
-        b = out_e[k] >> 5
-        img = out_e[k] & 31
-        dx = pos[a, 0] - pos[b, 0] - img_pos[img, 0]
-        dy = pos[a, 1] - pos[b, 1] - img_pos[img, 1]
-        dz = pos[a, 2] - pos[b, 2] - img_pos[img, 2]
-        c = rad[a] + rad[b]
-        ov = (c - math.sqrt(dx * dx + dy * dy + dz * dz)) / c
-        if ov > res_ov[1]:
-            count += 1
-        if ov > worst:
-            worst = ov
-            res_a[0] = a
-            res_b[0] = b
-    res_ov[0] = worst
-    return count
 
 
 def max_overlap(state, domain):
@@ -63,13 +38,14 @@ def max_overlap(state, domain):
         if m <= cap:
             break
         cap = m + 1024
-    res_ov = np.array([0.0, OVERLAP_TOLERANCE])
-    res_a = np.array([-1], np.int64)
-    res_b = np.array([-1], np.int64)
-    count = _pair_overlaps(anc, rad, out_a, out_e, m, img_pos, res_ov, res_a, res_b)
-    a = int(perm[res_a[0]]) if res_a[0] >= 0 else -1
-    b = int(perm[res_b[0]]) if res_b[0] >= 0 else -1
-    return float(res_ov[0]), a, b, int(count)
+    noff = np.zeros(n + 1, np.int64)
+    nent = np.zeros(2 * m, np.int32)
+    build_csr(n, m, out_a, out_e, noff, nent)
+    out = np.zeros(3, np.int64)
+    worst = overlap_report(anc, rad, noff, nent, img_pos, OVERLAP_TOLERANCE, out)
+    a = int(perm[out[0]]) if out[0] >= 0 else -1
+    b = int(perm[out[1]]) if out[1] >= 0 else -1
+    return float(worst), min(a, b), max(a, b), int(out[2])
 
 
 def check_state(state, domain):

@@ -53,15 +53,3 @@ def lammps(request):
 @pytest.fixture(scope="session")
 def liggghts(request):
     return _need(request, references.liggghts_binary)
-
-
-@pytest.fixture(autouse=True, scope="session")
-def _isolated_cache(tmp_path_factory):
-    path = tmp_path_factory.mktemp("lockgraph-cache")
-    old = os.environ.get("LOCKGRAPH_CACHE")
-    os.environ["LOCKGRAPH_CACHE"] = str(path)
-    yield path
-    if old is None:
-        os.environ.pop("LOCKGRAPH_CACHE", None)
-    else:
-        os.environ["LOCKGRAPH_CACHE"] = old
