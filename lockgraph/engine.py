@@ -257,6 +257,7 @@ class Engine:
             K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
+            self.par[K.P_EXTRA] = extra
             K.compute_reach(self.pos, self.vel, self.rad, self.reach, self.par, extra, self.top)
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
                 raise StepTooLargeError(

@@ -40,7 +40,7 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2
 
 # par: float parameters of the step
 (P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_HALFPER,
- P_RMAX) = range(13)
+ P_RMAX, P_EXTRA) = range(14)
 NPAR = 16
 # ipar: integer parameters
 I_LAW, I_DISH, I_CAP = range(3)
@@ -172,6 +172,8 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
     new = sig + fr * rad[k]
     if new <= reach[k]:
         return OK
+    # widen with the step's skin too: a particle that sped up once tends to again
+    new += par[P_EXTRA]
     if new + par[P_RMAX] >= par[P_HALFPER]:
         ctr[CTR_BAD] = k
         return SIGMA_TOO_LARGE
