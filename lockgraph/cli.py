@@ -14,7 +14,6 @@ import json
 import resource
 import sys
 import time
-import warnings
 
 from . import __version__
 from .errors import InputError, SimulationError
@@ -70,10 +69,8 @@ def cmd_run(args):
     params = scenarios.parse_overrides(args.param)
     sc = scenarios.load(args.scene, state=args.state, n=args.n, seed=args.seed, dt=args.dt,
                         params=params, progress=progress.message)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore" if args.json else "default")
-        sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=args.threads, lock=args.lock,
-                         scale=args.scale, policy=args.policy)
+    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=args.threads, lock=args.lock,
+                     scale=args.scale, policy=args.policy)
     sim.run(args.steps, progress=lambda d, t: progress.steps(sim, d, t))
     final = sim.state
     stats = sim.stats
@@ -85,10 +82,13 @@ def cmd_run(args):
         "dt": sc.dt,
         "seed": sc.params["seed"],
         "threads": args.threads,
-        "threads_used": stats["threads_used"],
         "lock": args.lock,
         "scale": args.scale,
         "policy": args.policy,
+        "events": stats["events"],
+        "mean_concurrency": stats["mean_concurrency"],
+        "blocked_picks": stats["blocked_picks"],
+        "wait_s": stats["wait_s"],
         "collisions": stats["collisions"],
         "pair_collisions": stats["pair_collisions"],
         "wall_collisions": stats["wall_collisions"],
@@ -147,7 +147,7 @@ def parser():
     r.add_argument("--dt", type=float, help="step length in s (scene parameter dt)")
     r.add_argument("--seed", type=int, help="random seed (scene parameter seed)")
     r.add_argument("--threads", type=int, default=1)
-    r.add_argument("--lock", default="graph", help="none | grid | graph")
+    r.add_argument("--lock", default="graph", help="none | grid | grid3d | graph (threads > 1)")
     r.add_argument("--scale", type=float, default=4.0, help="lock-graph SCALE")
     r.add_argument("--policy", default="exact", help="exact | paper")
     r.add_argument("--param", action="append", metavar="KEY=VALUE",

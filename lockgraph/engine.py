@@ -22,6 +22,8 @@ import time as _time
 import numpy as np
 
 from . import kernels as K
+from . import locks as L
+from .parallel import Workers, cycles_per_second
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -31,8 +33,11 @@ from .state import State
 from .tree import (NTOP, build, count_nodes, identity, node_bounds, pair_search, permute_mat3,
                    permute_vec, rebuild)
 
+LOCKS = ("none", "grid", "grid3d", "graph")
+POLICIES = ("exact", "paper")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
-                K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk"}
+                K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
+                K.STALL: "stall"}
 
 
 class Engine:
@@ -56,10 +61,19 @@ class Engine:
     copy : bool — work on a copy of the state's arrays (default).  With
         ``copy=False`` the engine takes the arrays over (no second copy in
         memory); the State object passed in must not be used afterwards.
+    threads : int — worker threads for the events (1: sequential).
+    lock : "none" | "grid" | "grid3d" | "graph" — lock regions for threads > 1.
+    scale : float — the lock graph's SCALE.
+    policy : "exact" | "paper" — exact: causality violations are detected and
+        the step redone sequentially, so results equal the sequential engine's
+        bit for bit; paper: the paper's rule, violations only counted.
+    maxskip : int — blocked events a thread may pass over to find a free one.
     """
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
-                 chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10):
+                 chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
+                 threads=1, lock="graph", scale=4.0, policy="exact", maxskip=8,
+                 stall_seconds=60.0):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
@@ -77,6 +91,24 @@ class Engine:
         self.collapse_limit = int(collapse_limit)
         self.chunk_events = int(chunk_events)
         self.record_events = bool(record_events)
+        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+            raise InputError("threads", f"must be an integer >= 1, got {threads!r}")
+        if lock not in LOCKS:
+            raise InputError("lock", f"unknown value {lock!r}; one of {', '.join(LOCKS)}")
+        if policy not in POLICIES:
+            raise InputError("policy", f"unknown value {policy!r}; one of {', '.join(POLICIES)}")
+        scale = float(scale)
+        if not (scale > 0 and math.isfinite(scale)):
+            raise InputError("scale", f"must be a finite number > 0, got {scale!r}")
+        if threads > 1 and lock == "none":
+            raise InputError("lock", "threads > 1 need lock regions: 'grid', 'grid3d' or 'graph'")
+        self.threads = int(threads)
+        self.lock = lock
+        self.scale = scale
+        self.policy = policy
+        self.workers = Workers(self.threads, maxskip, stall_seconds) if self.threads > 1 else None
+        self.repairs = 0
+        self.lock_stats = None
         hill = physics.hill
         if hill is not None and 1.5 * hill.omega * dt >= 0.25:
             raise InputError("dt", f"{dt} s is too long for the shearing sheet: "
@@ -135,6 +167,7 @@ class Engine:
         self.evt = np.full(n, np.inf)
         self.evp = np.full(n, -1, np.int32)
         self.evc = np.zeros(n, np.int32)
+        self.hidden = np.zeros(n, np.uint8)
         self.tour_t = np.full(2 * tournament_size(n), np.inf)
         self.tour_s = np.full(2 * tournament_size(n), -1, np.int32)
         jcap = max(256, n // 8)
@@ -146,6 +179,7 @@ class Engine:
         self.logi = np.zeros((lcap, 3), np.int64)
         self.log_steps = []  # (step index, first log entry) per step
         self.par = np.zeros(K.NPAR)
+        self.no_locks = (np.zeros(0, np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32))
         self.ipar = np.zeros(K.NIPAR, np.int64)
         self._encode()
 
@@ -181,6 +215,7 @@ class Engine:
         ipar[K.I_LAW] = law
         ipar[K.I_DISH] = 1 if dish else 0
         ipar[K.I_CAP] = self.collapse_limit
+        ipar[K.I_PAPER] = 1 if self.policy == "paper" else 0
 
     def state(self):
         """The current state as a State ordered by particle id (a copy)."""
@@ -198,11 +233,11 @@ class Engine:
     def _bundles(self, img_pos, img_vel, img_all):
         parts = (self.pos, self.vel, self.rad, self.mass, self.tl, self.ncoll, self.tlast, self.ids)
         step = (self.anc, self.reach, self.cis, self.work)
-        tree = (self.ntop, self.nbox, self.nreach)
+        tree = (self.ntop, self.nbox, self.nreach, self.nreach.view(np.int64))
         nbrs = (self.noff, self.nent, self.xhead, self.xent, self.xnext, self.ctr)
-        evq = (self.evt, self.evp, self.evc, self.tour_t, self.tour_s)
+        evq = (self.evt, self.evp, self.evc, self.tour_t, self.tour_s, self.hidden)
         jour = (self.jslot, self.jvel, self.jtlast, self.logt, self.logi)
-        cfg = (self.par, self.ipar, img_pos, img_vel, img_all)
+        cfg = (self.par, self.ipar, img_pos, img_vel, img_all, self.par.view(np.int64))
         return parts, step, tree, nbrs, evq, jour, cfg
 
     # ---- the step ------------------------------------------------------------
@@ -307,53 +342,101 @@ class Engine:
         self._img_pos, self._img_vel = img_pos, img_vel
         self.par[K.P_T0] = self.time
         log_start = int(self.ctr[K.LCOUNT]) if self.record_events else 0
+        sequential = self.threads == 1
         while True:
             self._setup(img_pos, img_vel, half)
             self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
             K.init_events(parts, nbrs, evq, cfg, st)
-            while True:
-                try:
-                    status = K.run_events(parts, step, tree, nbrs, evq, jour, cfg, st,
-                                          self.chunk_events)
-                except BaseException:
-                    self._rollback()  # KeyboardInterrupt between events: undo the step
-                    raise
-                if status == K.OK:
-                    if self.record_events:
-                        self.log_steps.append((self.steps_done, log_start))
-                    return st
-                if status == K.CHUNK:
-                    continue
-                if status in (K.NEED_JOURNAL, K.NEED_LOG):
-                    if status == K.NEED_JOURNAL:
-                        self._grow_journal()
-                    else:
-                        self._grow_log()
-                    parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
-                    continue
-                bad = int(self.ctr[K.CTR_BAD])
-                bad_id = int(self.ids[bad])
-                self._rollback()
+            try:
+                if sequential:
+                    status = self._events_sequential(st, img_pos, img_vel, full)
+                else:
+                    status = self._events_parallel(st, img_pos, img_vel, half, full)
+            except BaseException:
+                self._rollback()  # interrupted or a worker failed: undo the step
                 self.ctr[K.LCOUNT] = log_start
-                if status == K.POOL_OVERFLOW:
-                    self._grow_pool()
-                    break  # redo the step with a larger pool: same result
-                if status == K.COLLAPSE:
-                    raise InelasticCollapseError(
-                        f"inelastic collapse at t = {self.time:.9g} s: particle {bad_id} collided "
-                        f"more than {self.collapse_limit} times within one step of {self.dt} s "
-                        f"(collisions per step explode). Enable the collapse guard "
-                        f"(restitution TC model, scenario key 'tc'), lower the restitution "
-                        f"dissipation, or raise collapse_limit if this is genuine. The state is "
-                        f"left at the last completed step.")
-                if status == K.SIGMA_TOO_LARGE:
-                    raise StepTooLargeError(
-                        f"at t = {self.time:.9g} s particle {bad_id} sped up so much that it could "
-                        f"reach a periodic image of itself within dt = {self.dt} s; use a "
-                        f"smaller dt. The state is left at the last completed step.")
-                raise SimulationError(f"engine status {STATUS_NAMES.get(status, status)}")
+                raise
+            if status == K.OK:
+                if self.record_events:
+                    self.log_steps.append((self.steps_done, log_start))
+                return st
+            bad = int(self.ctr[K.CTR_BAD])
+            bad_id = int(self.ids[bad]) if 0 <= bad < self.n else -1
+            self._rollback()
+            self.ctr[K.LCOUNT] = log_start
+            if status == K.POOL_OVERFLOW:
+                self._grow_pool()
+                continue  # redo the step with a larger pool: same result
+            if status == K.VIOLATION:
+                self.repairs += 1
+                sequential = True
+                continue  # redo the step sequentially: the sequential result
+            if status == K.COLLAPSE:
+                raise InelasticCollapseError(
+                    f"inelastic collapse at t = {self.time:.9g} s: particle {bad_id} collided "
+                    f"more than {self.collapse_limit} times within one step of {self.dt} s "
+                    f"(collisions per step explode). Enable the collapse guard "
+                    f"(restitution TC model, scenario key 'tc'), lower the restitution "
+                    f"dissipation, or raise collapse_limit if this is genuine. The state is "
+                    f"left at the last completed step.")
+            if status == K.SIGMA_TOO_LARGE:
+                raise StepTooLargeError(
+                    f"at t = {self.time:.9g} s particle {bad_id} sped up so much that it could "
+                    f"reach a periodic image of itself within dt = {self.dt} s; use a "
+                    f"smaller dt. The state is left at the last completed step.")
+            if status == K.STALL:
+                raise SimulationError(
+                    f"the worker threads stalled at t = {self.time:.9g} s: no event completed "
+                    f"for {self.workers.stall_cycles / cycles_per_second():.0f} s. The state "
+                    f"is left at the last completed step.")
+            raise SimulationError(f"engine status {STATUS_NAMES.get(status, status)}")
+
+    def _events_sequential(self, st, img_pos, img_vel, full):
+        parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
+        while True:
+            status = K.run_events(parts, step, tree, nbrs, evq, jour, cfg, st, self.no_locks,
+                                  self.chunk_events)
+            if status == K.CHUNK:
+                continue
+            if status in (K.NEED_JOURNAL, K.NEED_LOG):
+                self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
+                parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
+                continue
+            return status
+
+    def build_locks(self, img_pos, half):
+        """The lock regions of the current step (after ``_setup``)."""
+        if self.lock == "graph":
+            return L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
+                                self.scale, self.n)
+        dims = 3 if self.lock == "grid3d" else 2
+        return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
+                            self.time, dims)
+
+    def _events_parallel(self, st, img_pos, img_vel, half, full):
+        regions = self.build_locks(img_pos, half)
+        self.lock_stats = regions.stats()
+        locks = (regions.lock_of, regions.loff, regions.ladj)
+        r = regions.count
+        lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
+        stt = np.zeros((self.threads, K.NSTAT))
+        try:
+            while True:
+                bundles = self._bundles(img_pos, img_vel, full)
+                status = self.workers.run(bundles, stt, locks, lstate)
+                if status in (K.NEED_JOURNAL, K.NEED_LOG):
+                    self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
+                    continue
+                return status
+        finally:
+            for row in stt:
+                m = max(st[K.S_MAXOV], row[K.S_MAXOV])
+                c = max(st[K.S_MAXCIS], row[K.S_MAXCIS])
+                st += row
+                st[K.S_MAXOV] = m
+                st[K.S_MAXCIS] = c
 
     def _rollback(self):
         K.rollback(self.pos, self.vel, self.tl, self.ncoll, self.tlast, self.anc, self.cis,
@@ -401,6 +484,12 @@ class Engine:
         cap = 2 * self.xent.shape[0]
         self.xent = np.zeros(cap, np.int32)
         self.xnext = np.zeros(cap, np.int32)
+
+    def close(self):
+        """Stop the worker threads (if any)."""
+        if self.workers is not None:
+            self.workers.close()
+            self.workers = None
 
     # ---- diagnostics ---------------------------------------------------------
     def initial_overlap(self, tol):

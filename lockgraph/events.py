@@ -16,7 +16,9 @@ its two children, the root the earliest of all.  Nodes store their winner's
 key — ``tour_t`` (2Q,) float64 time and ``tour_s`` (2Q,) int32 slot — so a
 climb compares neighbouring memory and never chases particles.  Events are
 ordered by (time, particle id): the order depends only on the physics and the
-ids, never on storage order or thread count.
+ids, never on storage order or thread count.  ``hidden`` (N,) uint8 takes a
+slot out of the queue without touching its event (worker threads hide events
+in flight or passed over).
 """
 import numpy as np
 from ._jit import kernel
@@ -64,23 +66,23 @@ def earlier(a, b, evt, ids):
 
 
 @kernel(inline=True)
-def _bucket_min(evt, ids, b, n):
+def _bucket_min(evt, ids, hidden, b, n):
     lo = b << BUCKET_BITS
     hi = min(lo + BUCKET, n)
     bt = np.inf
     bs = -1
     for k in range(lo, hi):
-        if key_less(evt[k], k, bt, bs, ids):
+        if hidden[k] == 0 and key_less(evt[k], k, bt, bs, ids):
             bt = evt[k]
             bs = k
     return bt, bs
 
 
 @kernel
-def build_queue(tour_t, tour_s, evt, ids, n):
+def build_queue(tour_t, tour_s, evt, ids, hidden, n):
     q = tour_t.shape[0] >> 1
     for b in range(q):
-        t, s = _bucket_min(evt, ids, b, n)
+        t, s = _bucket_min(evt, ids, hidden, b, n)
         tour_t[q + b] = t
         tour_s[q + b] = s
     for k in range(q - 1, 0, -1):
@@ -92,7 +94,7 @@ def build_queue(tour_t, tour_s, evt, ids, n):
 
 
 @kernel(inline=True)
-def update_queue(tour_t, tour_s, evt, ids, i):
+def update_queue(tour_t, tour_s, evt, ids, hidden, i):
     """Restore the tournament after evt[i] changed.
 
     Recomputes i's bucket, then climbs; stops at the first node whose winner
@@ -100,7 +102,7 @@ def update_queue(tour_t, tour_s, evt, ids, i):
     """
     q = tour_t.shape[0] >> 1
     b = i >> BUCKET_BITS
-    t, s = _bucket_min(evt, ids, b, evt.shape[0])
+    t, s = _bucket_min(evt, ids, hidden, b, evt.shape[0])
     k = q + b
     if tour_t[k] == t and tour_s[k] == s and s != i:
         return

@@ -13,16 +13,25 @@ which is the tree order of the current step):
   reaches (N,) (search radius + fr * radius, see ``tree``), collisions of each
   particle in this step (N,) int32, and an int64 work array (a search stack
   deeper than the tree).
-* ``tree = (ntop, nbox, nreach)`` — see ``tree``.
+* ``tree = (ntop, nbox, nreach, nreach_bits)`` — see ``tree`` (the last is an
+  int64 view of ``nreach`` for atomic maxima).
 * ``nbrs = (noff, nent, xhead, xent, xnext, ctr)`` — see ``neighbors``.
-* ``evq = (evt, evp, evc, tour_t, tour_s)`` — see ``events``.
+* ``evq = (evt, evp, evc, tour_t, tour_s, hidden)`` — see ``events``.
 * ``jour = (jslot, jvel, jtlast, logt, logi)`` — undo journal: the velocity
   and last collision time of each particle before its first collision in the
   step; and the optional event log (empty arrays: off): ``logt`` (L,) step
   time and ``logi`` (L,3) int64 ``(id_a, id_b or FLOOR/CYLINDER, img)`` of
   every resolved collision, seen from particle a.
-* ``cfg = (par, ipar, img_pos, img_vel, img_all)`` — step constants.
-* ``st`` (NSTAT,) float64 — statistics of the step.
+* ``cfg = (par, ipar, img_pos, img_vel, img_all, parb)`` — step constants
+  (``parb`` is an int64 view of ``par``, for the atomic P_RMAX).
+* ``locks = (lock_of, loff, ladj)`` — the step's lock regions (empty arrays
+  when running sequentially); a widened reach that brings together particles
+  of non-adjacent regions is a violation of the lock design.
+* ``st`` (NSTAT,) float64 — statistics of the step (one row per thread).
+
+Counters shared between threads (pool, journal, log) are advanced with atomic
+fetch-add, tree reaches with atomic maxima; everything else a kernel writes
+belongs to particles whose lock regions the calling thread holds.
 
 Kernels return a status code; all state lives in the arrays, so a kernel that
 stops for more room resumes exactly where it left off.
@@ -33,6 +42,7 @@ import numpy as np
 from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, build_queue
+from .atomics import fetch_add, fetch_max, float_bits
 from .neighbors import JCOUNT, LCOUNT, XCOUNT, add_pair
 from .predict import INF, cylinder_time, floor_time, pair_time
 from .restitution import coefficient
@@ -43,14 +53,14 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2
  P_RMAX, P_EXTRA) = range(14)
 NPAR = 16
 # ipar: integer parameters
-I_LAW, I_DISH, I_CAP = range(3)
+I_LAW, I_DISH, I_CAP, I_PAPER = range(4)
 NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
- S_FLOORIMP, S_CYLIMP, S_MAXCIS) = range(12)
-NSTAT = 16
+ S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT) = range(18)
+NSTAT = 24
 # status codes
-OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG = range(7)
+OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL = range(9)
 CTR_BAD = 2  # ctr slot: the slot that caused a COLLAPSE / SIGMA_TOO_LARGE
 
 WALL_KEY_FLOOR = 1 << 62
@@ -68,8 +78,8 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
     """Set particle i's earliest event at or after t_now (ties: partner id, image)."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour_t, tour_s = evq
-    par, ipar, img_pos, img_vel, img_all = cfg
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
     t_end = par[P_DT]
     best = INF
     bkey = WALL_KEY_CYL + 1
@@ -123,14 +133,13 @@ def journal(i, vel, tlast, cis, jour, ctr):
         jslot = jour[0]
         jvel = jour[1]
         jtlast = jour[2]
-        k = ctr[JCOUNT]
+        k = fetch_add(ctr, JCOUNT, 1)
         jslot[k] = i
         jvel[k, 0] = vel[i, 0]
         jvel[k, 1] = vel[i, 1]
         jvel[k, 2] = vel[i, 2]
         if tlast.shape[0] > 0:  # tracked only under a collapse guard
             jtlast[k] = tlast[i]
-        ctr[JCOUNT] = k + 1
 
 
 @kernel(inline=True)
@@ -138,16 +147,29 @@ def log_event(jour, ctr, t, a, b, img):
     logt = jour[3]
     if logt.shape[0] > 0:
         logi = jour[4]
-        k = ctr[LCOUNT]
+        k = fetch_add(ctr, LCOUNT, 1)
         logt[k] = t
         logi[k, 0] = a
         logi[k, 1] = b
         logi[k, 2] = img
-        ctr[LCOUNT] = k + 1
 
 
 @kernel(inline=True)
-def grow(k, t, parts, step, tree, nbrs, cfg, st):
+def regions_adjacent(locks, a, b):
+    """Are the lock regions of slots a and b the same or adjacent?"""
+    lock_of, loff, ladj = locks
+    la = lock_of[a]
+    lb = lock_of[b]
+    if la == lb:
+        return True
+    for k in range(loff[la], loff[la + 1]):
+        if ladj[k] == lb:
+            return True
+    return False
+
+
+@kernel(inline=True)
+def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
     """Widen k's search radius after its velocity changed at step time t.
 
     The new bound covers k's displacement so far plus its straight path to the
@@ -156,9 +178,9 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
     """
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     anc, reach, cis, work = step
-    ntop, nbox, nreach = tree
+    ntop, nbox, nreach, nreach_bits = tree
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    par, ipar, img_pos, img_vel, img_all = cfg
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
     dt = par[P_DT]
     s = par[P_SHEAR]
     fr = par[P_FR]
@@ -178,9 +200,8 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
         ctr[CTR_BAD] = k
         return SIGMA_TOO_LARGE
     reach[k] = new
-    if new > par[P_RMAX]:
-        par[P_RMAX] = new
-    raise_reach(ntop, nreach, k, new)
+    fetch_max(parb, P_RMAX, float_bits(new))
+    raise_reach(ntop, nreach_bits, k, new)
     st[S_GROW] += 1
     stack = work  # depth-first: never more entries than the tree's depth + 1
     for q in range(img_all.shape[0]):
@@ -209,6 +230,12 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
                 if m == k and img == SELF_IMAGE:
                     continue
                 if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
+                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m):
+                        # beyond the lock design: regions thought independent now interact
+                        st[S_REACHOUT] += 1
+                        if ipar[I_PAPER] == 0:
+                            ctr[CTR_BAD] = k
+                            return VIOLATION
                     added = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
                     if added < 0:
                         return POOL_OVERFLOW
@@ -217,13 +244,13 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st):
 
 
 @kernel(inline=True)
-def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
+def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
     """Resolve the collision of i with image img of j at step time t."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     anc, reach, cis, work = step
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour_t, tour_s = evq
-    par, ipar, img_pos, img_vel, img_all = cfg
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
     journal(i, vel, tlast, cis, jour, ctr)
     journal(j, vel, tlast, cis, jour, ctr)
     xi0, xi1, xi2 = position_at(pos, vel, i, t)
@@ -288,27 +315,25 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         if c > ipar[I_CAP]:
             ctr[CTR_BAD] = i if cis[i] >= cis[j] else j
             return COLLAPSE
-        status = grow(i, t, parts, step, tree, nbrs, cfg, st)
+        status = grow(i, t, parts, step, tree, nbrs, cfg, st, locks)
         if status != OK:
             return status
-        status = grow(j, t, parts, step, tree, nbrs, cfg, st)
+        status = grow(j, t, parts, step, tree, nbrs, cfg, st, locks)
         if status != OK:
             return status
     predict(i, t, parts, nbrs, evq, cfg)
-    update_queue(tour_t, tour_s, evt, ids, i)
     predict(j, t, parts, nbrs, evq, cfg)
-    update_queue(tour_t, tour_s, evt, ids, j)
     return OK
 
 
 @kernel(inline=True)
-def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
+def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
     """Resolve particle i hitting the floor or the cylinder at step time t."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     anc, reach, cis, work = step
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour_t, tour_s = evq
-    par, ipar, img_pos, img_vel, img_all = cfg
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
     journal(i, vel, tlast, cis, jour, ctr)
     x0, x1, x2 = position_at(pos, vel, i, t)
     # Walls neither follow nor reset the collapse guard's clock: a grain resting
@@ -352,13 +377,12 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st):
         if cis[i] > ipar[I_CAP]:
             ctr[CTR_BAD] = i
             return COLLAPSE
-        status = grow(i, t, parts, step, tree, nbrs, cfg, st)
+        status = grow(i, t, parts, step, tree, nbrs, cfg, st, locks)
         if status != OK:
             return status
     else:
         st[S_GRAZE] += 1
     predict(i, t, parts, nbrs, evq, cfg)
-    update_queue(tour_t, tour_s, evt, ids, i)
     return OK
 
 
@@ -389,8 +413,8 @@ def init_events(parts, nbrs, evq, cfg, st):
     """
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     noff, nent, xhead, xent, xnext, ctr = nbrs
-    evt, evp, evc, tour_t, tour_s = evq
-    par, ipar, img_pos, img_vel, img_all = cfg
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
     n = pos.shape[0]
     t_end = par[P_DT]
     for i in range(n):
@@ -429,22 +453,43 @@ def init_events(parts, nbrs, evq, cfg, st):
             if t < evt[i]:
                 evt[i] = t
                 evp[i] = CYLINDER
-    build_queue(tour_t, tour_s, evt, ids, n)
+    build_queue(tour_t, tour_s, evt, ids, hidden, n)
+
+
+@kernel(inline=True)
+def process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
+    """Carry out slot i's pending event at step time t (the caller owns i and its
+    partner).  A stale event (the partner collided since it was predicted) only
+    predicts i again.  Every slot whose pending event changed must then be
+    updated in the queue by the caller: i, and the partner if the status's
+    second value is >= 0.  Returns (status, partner slot or -1)."""
+    ncoll = parts[5]
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    p = evp[i]
+    st[S_POPS] += 1
+    if p >= 0:
+        j = p >> 5
+        if np.int32(ncoll[j]) != evc[i]:
+            st[S_STALE] += 1  # partner collided since: predict i again
+            predict(i, t, parts, nbrs, evq, cfg)
+            return OK, -1
+        return collide_pair(i, j, p & 31, t, parts, step, tree, nbrs, evq, jour, cfg, st,
+                            locks), j
+    return collide_wall(i, p, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks), -1
 
 
 @kernel
-def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
+def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, max_events):
     """Process events in (time, id) order until the step end or a status.
 
     Returns OK when no event is left before the step end, CHUNK after
-    ``max_events`` events, NEED_JOURNAL (nothing changed; grow the journal and
-    call again) or an error status (POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE:
-    the step must be rolled back).
+    ``max_events`` events, NEED_JOURNAL / NEED_LOG (nothing changed; grow the
+    buffer and call again) or an error status (POOL_OVERFLOW, COLLAPSE,
+    SIGMA_TOO_LARGE: the step must be rolled back).
     """
-    ncoll = parts[5]
     ids = parts[7]
     ctr = nbrs[5]
-    evt, evp, evc, tour_t, tour_s = evq
+    evt, evp, evc, tour_t, tour_s, hidden = evq
     jslot = jour[0]
     logt = jour[3]
     dt = cfg[0][P_DT]
@@ -456,26 +501,16 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, max_events):
         t = evt[i]
         if not t < dt:
             return OK
-        p = evp[i]
         if logt.shape[0] > 0 and ctr[LCOUNT] >= logt.shape[0]:
             return NEED_LOG
-        st[S_POPS] += 1
-        if p >= 0:
-            j = p >> 5
-            if np.int32(ncoll[j]) != evc[i]:
-                st[S_STALE] += 1  # partner collided since: predict i again
-                predict(i, t, parts, nbrs, evq, cfg)
-                update_queue(tour_t, tour_s, evt, ids, i)
-                continue
-            if ctr[JCOUNT] + 2 > jslot.shape[0]:
-                return NEED_JOURNAL
-            status = collide_pair(i, j, p & 31, t, parts, step, tree, nbrs, evq, jour, cfg, st)
-        else:
-            if ctr[JCOUNT] + 1 > jslot.shape[0]:
-                return NEED_JOURNAL
-            status = collide_wall(i, p, t, parts, step, tree, nbrs, evq, jour, cfg, st)
+        if ctr[JCOUNT] + 2 > jslot.shape[0]:
+            return NEED_JOURNAL
+        status, j = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
         if status != OK:
             return status
+        update_queue(tour_t, tour_s, evt, ids, hidden, i)
+        if j >= 0:
+            update_queue(tour_t, tour_s, evt, ids, hidden, j)
         done += 1
     return CHUNK
 

@@ -11,7 +11,9 @@ lists (j, img) then j lists (i, 26 - img).
   entry or -1, ``xent`` / ``xnext`` (X,) int32, and ``ctr[XCOUNT]`` entries used.
 """
 import numpy as np
+
 from ._jit import kernel
+from .atomics import cas, fetch_add, load
 
 XCOUNT = 0  # ctr slot: extras used
 JCOUNT = 1  # ctr slot: journal entries used
@@ -58,23 +60,30 @@ def has_entry(noff, nent, xhead, xent, xnext, i, packed):
     return False
 
 
+@kernel(inline=True)
+def _push(xhead, xent, xnext, owner, x, packed):
+    """Prepend entry x to owner's list (lock-free: other threads may push too)."""
+    xent[x] = packed
+    while True:
+        old = load(xhead, owner)
+        xnext[x] = old
+        if cas(xhead, owner, old, x) == old:
+            return
+
+
 @kernel
 def add_pair(noff, nent, xhead, xent, xnext, ctr, a, b, img):
     """Add the symmetric candidate pair (a, b in image img) unless present.
 
     Returns 1 if added, 0 if it was already there, -1 if the pool is full.
+    Safe against other threads adding to the pool at the same time.
     """
     packed = (b << 5) | img
     if has_entry(noff, nent, xhead, xent, xnext, a, packed):
         return 0
-    x = ctr[XCOUNT]
+    x = fetch_add(ctr, XCOUNT, 2)
     if x + 2 > xent.shape[0]:
         return -1
-    xent[x] = packed
-    xnext[x] = xhead[a]
-    xhead[a] = x
-    xent[x + 1] = (a << 5) | (26 - img)
-    xnext[x + 1] = xhead[b]
-    xhead[b] = x + 1
-    ctr[XCOUNT] = x + 2
+    _push(xhead, xent, xnext, a, x, packed)
+    _push(xhead, xent, xnext, b, x + 1, (a << 5) | (26 - img))
     return 1

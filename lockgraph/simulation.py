@@ -1,26 +1,17 @@
 """``Simulation``: a state, its physics and a step length; ``run(steps)``; ``state``; ``stats``."""
 import functools
-import math
 import time as _time
-import warnings
 
 import numpy as np
 
 from . import kernels as K
 from .engine import Engine
+from .parallel import cycles_per_second
 from .errors import InputError
 from .overlaps import OVERLAP_TOLERANCE
 from .physics import Physics
 from .state import State
 
-LOCKS = ("none", "grid", "graph")
-POLICIES = ("exact", "paper")
-
-
-def _option(field, value, options):
-    if value not in options:
-        raise InputError(field, f"unknown value {value!r}; one of {', '.join(options)}")
-    return value
 
 
 @functools.lru_cache(maxsize=None)
@@ -42,6 +33,10 @@ def compile_kernels():
     ]
     for ph in systems:
         Engine(st, ph, 0.05).step()
+    # the threaded worker and the lock structures
+    eng = Engine(st, systems[0], 0.05, threads=2, lock="graph")
+    eng.step()
+    eng.close()
     return _time.perf_counter() - t0
 
 
@@ -54,10 +49,14 @@ class Simulation:
     physics : Physics — domain, forces, restitution law, collapse guard.
     dt : float, s — step length.
     threads : int — worker threads (1: sequential engine).
-    lock : "none" | "grid" | "graph" — spatial locks of the parallel engine.
+    lock : "none" | "grid" | "grid3d" | "graph" — spatial locks of the parallel
+        engine (grid: 2-D x-y cells, 8 neighbours; grid3d: 26 neighbours).
     scale : float — SCALE of the lock graph (lock-node size in units of the
         largest radius plus search radius below it).
-    policy : "exact" | "paper" — parallel event selection (see ARCHITECTURE.md).
+    policy : "exact" | "paper" — exact (default): causality violations are
+        detected and repaired, so any thread count gives the sequential result
+        bit for bit; paper: the paper's rule, violations only counted.
+    maxskip : int — blocked events a thread may pass over to find a free one.
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).
     copy : bool — with False the simulation takes over the state's arrays
         instead of copying them (for systems near the memory limit); the State
@@ -65,25 +64,22 @@ class Simulation:
     """
 
     def __init__(self, state, physics, dt, *, threads=1, lock="graph", scale=4.0,
-                 policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True):
+                 policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True,
+                 maxskip=8):
         if not isinstance(state, State):
             raise InputError("state", f"must be a lockgraph.State, got {type(state).__name__}")
         if not isinstance(physics, Physics):
             raise InputError("physics", f"must be a lockgraph.Physics, got {type(physics).__name__}")
-        if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
-            raise InputError("threads", f"must be an integer >= 1, got {threads!r}")
-        self.threads = int(threads)
-        self.lock = _option("lock", lock, LOCKS)
-        self.policy = _option("policy", policy, POLICIES)
-        scale = float(scale)
-        if not (scale > 0 and math.isfinite(scale)):
-            raise InputError("scale", f"must be a finite number > 0, got {scale!r}")
-        self.scale = scale
         self.physics = physics
         physics.domain.check_inside(state.pos, state.radius)
         self.compile_s = compile_kernels()
         self._engine = Engine(state, physics, dt, skin=skin, leaf_size=leaf_size,
-                              collapse_limit=collapse_limit, copy=copy)
+                              collapse_limit=collapse_limit, copy=copy, threads=threads,
+                              lock=lock, scale=scale, policy=policy, maxskip=maxskip)
+        self.threads = self._engine.threads
+        self.lock = self._engine.lock
+        self.scale = self._engine.scale
+        self.policy = self._engine.policy
         worst, a, b, count = self._engine.initial_overlap(OVERLAP_TOLERANCE)
         if worst > OVERLAP_TOLERANCE:
             raise InputError("state.pos", f"particles {a} and {b} overlap by {worst:.3g} of their "
@@ -91,10 +87,6 @@ class Simulation:
                              f"{OVERLAP_TOLERANCE:g})")
         self.initial_overlap = worst
         self.dt = self._engine.dt
-        self.threads_used = 1
-        if self.threads > 1:
-            warnings.warn("the parallel engine is not available yet: running sequentially "
-                          "(threads_used = 1)", RuntimeWarning, stacklevel=2)
         self.wall_s = 0.0
         self.steps = 0
 
@@ -150,11 +142,16 @@ class Simulation:
             "compile_s": self.compile_s,
             "events_per_s": (pairs + walls) / self.wall_s if self.wall_s > 0 else 0.0,
             "threads": self.threads,
-            "threads_used": self.threads_used,
             "lock": self.lock,
             "scale": self.scale,
             "policy": self.policy,
-            "violations": 0,
-            "repairs": 0,
+            "events": int(t[K.S_POPS]),
+            "mean_concurrency": (float(t[K.S_CONC] / t[K.S_CLAIMS]) if t[K.S_CLAIMS] else
+                                 (1.0 if self.threads == 1 else 0.0)),
+            "blocked_picks": int(t[K.S_BLOCKED]),
+            "violations": int(t[K.S_VIOL] + t[K.S_REACHOUT]),
+            "repairs": self._engine.repairs,
+            "wait_s": float(t[K.S_WAIT]) / cycles_per_second() if t[K.S_WAIT] else 0.0,
+            "locks": self._engine.lock_stats,
         }
         return out

@@ -25,7 +25,9 @@ Particles are stored in tree order: node ``k`` covers slots
 ``start..end-1``.  ``build`` returns the permutation that puts them there.
 """
 import numpy as np
+
 from ._jit import kernel
+from .atomics import fetch_max, float_bits
 
 LEFT, RIGHT, START, END, PARENT, AXIS = 0, 1, 2, 3, 4, 5
 NTOP = 6
@@ -406,11 +408,18 @@ def find_leaf(ntop, slot):
 
 
 @kernel
-def raise_reach(ntop, nreach, slot, value):
-    """Raise the max reach of every node above ``slot`` to at least ``value``."""
+def raise_reach(ntop, nreach_bits, slot, value):
+    """Raise the max reach of every node above ``slot`` to at least ``value``.
+
+    ``nreach_bits`` is the int64 view of ``nreach``: reaches are non-negative,
+    so an atomic integer maximum of the bit patterns is a maximum of the values
+    (safe with other threads raising at the same time).
+    """
     nd = find_leaf(ntop, slot)
-    while nd >= 0 and nreach[nd] < value:
-        nreach[nd] = value
+    bits = float_bits(value)
+    while nd >= 0:
+        if fetch_max(nreach_bits, nd, bits) >= bits:
+            return  # already there: so are its ancestors (raised bottom-up)
         nd = ntop[nd, PARENT]
 
 

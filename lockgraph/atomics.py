@@ -1,0 +1,166 @@
+"""Atomic operations on int32/int64 array elements for nogil kernels, and spin helpers.
+
+numba has no CPU atomics; these ``@intrinsic`` functions emit LLVM's
+``atomicrmw`` / ``cmpxchg`` / atomic ``load`` / ``store`` (sequentially
+consistent) on the address of ``arr[i]``.  A thread that spins on memory another
+thread writes must read it with ``load`` — a plain load in a loop is hoisted out
+of the loop by LLVM and the thread never sees the change.
+
+Float64 maxima: for non-negative doubles the IEEE bit patterns, read as signed
+int64, order exactly like the values, so ``fetch_max`` on an int64 view of a
+float64 array is an atomic maximum of non-negative floats.
+"""
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from ._jit import kernel
+
+
+def _item_pointer(context, builder, arr_t, arr, idx_t, idx):
+    ary = context.make_array(arr_t)(context, builder, arr)
+    i = context.cast(builder, idx, idx_t, types.intp)
+    return cgutils.get_item_pointer(context, builder, arr_t, ary, [i], wraparound=False)
+
+
+def _check(arr):
+    if not (isinstance(arr, types.Array) and arr.dtype in (types.int64, types.int32)
+            and arr.ndim == 1):
+        raise TypeError("atomics work on 1-D int32 or int64 arrays")
+
+
+@intrinsic
+def fetch_add(typingctx, arr, i, val):
+    """arr[i] += val atomically; returns the old value."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        return builder.atomic_rmw("add", ptr, v, "seq_cst")
+
+    return arr.dtype(arr, i, val), codegen
+
+
+@intrinsic
+def fetch_max(typingctx, arr, i, val):
+    """arr[i] = max(arr[i], val) atomically (signed); returns the old value."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        return builder.atomic_rmw("max", ptr, v, "seq_cst")
+
+    return arr.dtype(arr, i, val), codegen
+
+
+@intrinsic
+def cas(typingctx, arr, i, expected, new):
+    """If arr[i] == expected store new; returns the value seen (== expected on success)."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        e = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        n = context.cast(builder, args[3], sig.args[3], sig.args[0].dtype)
+        pair = builder.cmpxchg(ptr, e, n, "seq_cst", "seq_cst")
+        return builder.extract_value(pair, 0)
+
+    return arr.dtype(arr, i, expected, new), codegen
+
+
+@intrinsic
+def load(typingctx, arr, i):
+    """Atomic (acquire) load of arr[i]: never hoisted out of a spin loop."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        return builder.load_atomic(ptr, "acquire", sig.args[0].dtype.bitwidth // 8)
+
+    return arr.dtype(arr, i), codegen
+
+
+@intrinsic
+def store(typingctx, arr, i, val):
+    """Atomic (release) store of val into arr[i]."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        builder.store_atomic(v, ptr, "release", sig.args[0].dtype.bitwidth // 8)
+        return context.get_dummy_value()
+
+    return types.none(arr, i, val), codegen
+
+
+@intrinsic
+def cpu_relax(typingctx):
+    """The x86 PAUSE hint for spin loops (a no-op elsewhere)."""
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.VoidType(), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse2.pause")
+        builder.call(fn, [])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
+@intrinsic
+def sched_yield(typingctx):
+    """Give the CPU to another runnable thread (libc ``sched_yield``)."""
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.IntType(32), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "sched_yield")
+        builder.call(fn, [])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
+@intrinsic
+def float_bits(typingctx, x):
+    """The IEEE-754 bits of a float64 as an int64 (a bit cast, no conversion)."""
+    if x != types.float64:
+        raise TypeError("float_bits takes a float64")
+
+    def codegen(context, builder, sig, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(x), codegen
+
+
+@intrinsic
+def cycles(typingctx):
+    """The CPU's cycle counter (llvm.readcyclecounter): cheap timing inside kernels."""
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.IntType(64), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
+        return builder.call(fn, [])
+
+    return types.int64(), codegen
+
+
+@kernel(inline=True)
+def spin_lock(word, i):
+    """Acquire the spinlock word[i] (0 free, 1 held): bounded spinning, then yielding."""
+    spins = 0
+    while True:
+        if load(word, i) == 0 and cas(word, i, 0, 1) == 0:
+            return
+        spins += 1
+        if spins < 64:
+            cpu_relax()
+        else:
+            sched_yield()
+
+
+@kernel(inline=True)
+def spin_unlock(word, i):
+    store(word, i, 0)

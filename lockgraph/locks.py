@@ -1,0 +1,301 @@
+"""Spatial lock regions for the parallel engine: the lock graph and grid locks.
+
+Both give the same structure, rebuilt every step:
+
+* ``lock_of`` (N,) int32 — the lock region of each storage slot (every
+  particle has exactly one, including regions without neighbours);
+* ``loff`` (R+1,) int64, ``ladj`` (E,) int32 — symmetric adjacency in CSR form,
+  without self-loops;
+* ``boxes`` (R, 6) float64 — each region's box (for pictures and tests).
+
+Coverage: any two particles that may meet within the step (anchors within
+``reach[a] + reach[b]``, see ``tree``) lie in the same region or in adjacent
+regions.  An event may run only if its particles' regions and all regions
+adjacent to them are free.
+
+**Lock graph** (Lewis & Swords): a node of the kD-tree is a lock node if it is a
+leaf or if its size (largest box side) is below ``scale`` times the largest
+reach under it; recursion stops at the first lock node on every root-to-leaf
+path.  Edges come from the paper's two-argument recursion from (root, root)
+(and root against each periodic image of root): two lock nodes whose boxes are
+within their reaches are joined.  Larger ``scale`` moves lock nodes up the
+tree: fewer, larger regions with fewer edges.
+
+**Grid locks** (the earlier method): a uniform grid whose cell is at least the
+largest pair reach (two largest reaches: "2 x max radius + search radius"),
+over x-y (2-D, 8 neighbours) or x-y-z (3-D, 26 neighbours); periodic and
+sheared boundaries get the neighbours their images bring.
+"""
+import math
+
+import numpy as np
+
+from ._jit import kernel
+from .tree import AXIS, END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2
+
+KINDS = ("graph", "grid", "grid3d")
+
+
+@kernel
+def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack):
+    """Top-down: lockid[nd] = region index for lock nodes, -1 above them.
+
+    Returns the number of lock nodes (regions) or -1 if the stack was short.
+    """
+    nl = 0
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        nd = stack[sp]
+        size = max(nbox[nd, 3] - nbox[nd, 0], nbox[nd, 4] - nbox[nd, 1], nbox[nd, 5] - nbox[nd, 2])
+        if ntop[nd, LEFT] < 0 or size < scale * nreach[nd]:
+            lockid[nd] = nl
+            nl += 1
+            continue
+        lockid[nd] = -1
+        if sp + 2 > stack.shape[0]:
+            return -1
+        stack[sp] = ntop[nd, RIGHT]
+        stack[sp + 1] = ntop[nd, LEFT]
+        sp += 2
+    return nl
+
+
+@kernel
+def _fill_lock_of(ntop, lockid, nnodes, lock_of, lnode):
+    for nd in range(nnodes):
+        k = lockid[nd]
+        if k >= 0:
+            lnode[k] = nd
+            for s in range(ntop[nd, START], ntop[nd, END]):
+                lock_of[s] = k
+
+
+@kernel
+def _lock_edges(ntop, nbox, nreach, lockid, half_images, img_pos, out_u, out_v, stack):
+    """Two-argument recursion over lock nodes.  Returns the number of edges found
+    (entries beyond len(out_u) are counted, not stored), or -1 for a short stack."""
+    cap = out_u.shape[0]
+    count = 0
+    for q in range(half_images.shape[0]):
+        img = half_images[q]
+        ox = img_pos[img, 0]
+        oy = img_pos[img, 1]
+        oz = img_pos[img, 2]
+        selfimg = img == SELF_IMAGE
+        stack[0, 0] = 0
+        stack[0, 1] = 0
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            na = stack[sp, 0]
+            nb = stack[sp, 1]
+            if sp + 3 > stack.shape[0]:
+                return -1
+            ka = lockid[na]
+            kb = lockid[nb]
+            if selfimg and na == nb:
+                if ka >= 0:
+                    continue
+                la = ntop[na, LEFT]
+                ra = ntop[na, RIGHT]
+                stack[sp, 0] = la
+                stack[sp, 1] = la
+                stack[sp + 1, 0] = la
+                stack[sp + 1, 1] = ra
+                stack[sp + 2, 0] = ra
+                stack[sp + 2, 1] = ra
+                sp += 3
+                continue
+            r = nreach[na] + nreach[nb]
+            if _box_gap2(nbox, na, nb, ox, oy, oz) > r * r:
+                continue
+            if ka >= 0 and kb >= 0:
+                if ka != kb:
+                    if count < cap:
+                        out_u[count] = min(ka, kb)
+                        out_v[count] = max(ka, kb)
+                    count += 1
+                continue
+            if ka >= 0 or (kb < 0 and (nbox[nb, 3] - nbox[nb, 0]) + (nbox[nb, 4] - nbox[nb, 1])
+                           + (nbox[nb, 5] - nbox[nb, 2]) > (nbox[na, 3] - nbox[na, 0])
+                           + (nbox[na, 4] - nbox[na, 1]) + (nbox[na, 5] - nbox[na, 2])):
+                stack[sp, 0] = na
+                stack[sp, 1] = ntop[nb, LEFT]
+                stack[sp + 1, 0] = na
+                stack[sp + 1, 1] = ntop[nb, RIGHT]
+            else:
+                stack[sp, 0] = ntop[na, LEFT]
+                stack[sp, 1] = nb
+                stack[sp + 1, 0] = ntop[na, RIGHT]
+                stack[sp + 1, 1] = nb
+            sp += 2
+    return count
+
+
+def _csr(nregions, u, v):
+    """Symmetric CSR adjacency from an edge list (duplicates removed)."""
+    if len(u):
+        key = np.unique(u.astype(np.int64) * nregions + v.astype(np.int64))
+        u = (key // nregions).astype(np.int32)
+        v = (key % nregions).astype(np.int32)
+    a = np.concatenate([u, v])
+    b = np.concatenate([v, u])
+    order = np.lexsort((b, a))
+    a, b = a[order], b[order]
+    loff = np.zeros(nregions + 1, np.int64)
+    np.add.at(loff, a.astype(np.int64) + 1, 1)
+    np.cumsum(loff, out=loff)
+    return loff, b.astype(np.int32)
+
+
+class LockRegions:
+    """Lock regions of one step.  See the module docstring for the arrays."""
+
+    def __init__(self, kind, lock_of, loff, ladj, boxes, info):
+        self.kind = kind
+        self.lock_of = lock_of
+        self.loff = loff
+        self.ladj = ladj
+        self.boxes = boxes
+        self.info = info
+
+    @property
+    def count(self):
+        return self.loff.shape[0] - 1
+
+    def degrees(self):
+        return np.diff(self.loff)
+
+    def stats(self):
+        d = self.degrees()
+        occupied = np.bincount(self.lock_of, minlength=self.count)
+        return {"kind": self.kind, "regions": int(self.count),
+                "occupied": int(np.count_nonzero(occupied)),
+                "mean_degree": float(d.mean()) if d.size else 0.0,
+                "max_degree": int(d.max()) if d.size else 0,
+                "mean_particles": float(occupied[occupied > 0].mean()) if occupied.any() else 0.0,
+                **self.info}
+
+    def adjacent(self, a, b):
+        """True if regions a and b are the same or adjacent."""
+        if a == b:
+            return True
+        return b in self.ladj[self.loff[a]:self.loff[a + 1]]
+
+
+def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n):
+    """The lock graph of a built tree (node bounds and reaches filled in)."""
+    lockid = np.full(nnodes, -1, np.int32)
+    stack = np.zeros(256, np.int64)
+    nl = _mark_lock_nodes(ntop, nbox, nreach, float(scale), lockid, stack)
+    if nl < 0:
+        raise RuntimeError("lock-node search deeper than its stack")
+    lock_of = np.zeros(n, np.int32)
+    lnode = np.zeros(nl, np.int32)
+    _fill_lock_of(ntop, lockid, nnodes, lock_of, lnode)
+    cap = 8 * nl + 64
+    stack2 = np.zeros((4096, 2), np.int64)
+    while True:
+        u = np.zeros(cap, np.int32)
+        v = np.zeros(cap, np.int32)
+        m = _lock_edges(ntop, nbox, nreach, lockid, half_images, img_pos, u, v, stack2)
+        if m < 0:
+            raise RuntimeError("lock-graph recursion deeper than its stack")
+        if m <= cap:
+            break
+        cap = m + 64
+    loff, ladj = _csr(nl, u[:m], v[:m])
+    return LockRegions("graph", lock_of, loff, ladj, nbox[lnode].copy(),
+                       {"scale": float(scale), "lock_nodes": lnode})
+
+
+def grid_locks(anc, reach_pair_max, domain, time, dims=2):
+    """Grid lock regions over x-y (dims=2) or x-y-z (dims=3) for step-start anchors."""
+    n = anc.shape[0]
+    c = max(float(reach_pair_max), 1e-300)
+    periodic = list(domain.periodic)
+    lo = np.zeros(3)
+    size = np.zeros(3)
+    ncell = np.ones(3, np.int64)
+    box_len = [getattr(domain, "lx", None), getattr(domain, "ly", None), None]
+    if domain.describe()["type"] == "periodic_cube":
+        box_len = [domain.length] * 3
+    for a in range(dims):
+        if periodic[a]:
+            L = box_len[a]
+            ncell[a] = max(1, int(math.floor(L / c)))
+            lo[a] = -0.5 * L
+            size[a] = L / ncell[a]
+        else:
+            amin, amax = float(anc[:, a].min()), float(anc[:, a].max())
+            ncell[a] = max(1, int(math.ceil((amax - amin) / c)))
+            lo[a] = amin
+            size[a] = max((amax - amin) / ncell[a], c)
+    for a in range(dims, 3):
+        lo[a] = float(anc[:, a].min())
+        size[a] = max(float(anc[:, a].max()) - lo[a], 1e-300) * (1 + 1e-12) + 1e-300
+    idx = np.zeros((n, 3), np.int64)
+    for a in range(3):
+        if a < dims:
+            idx[:, a] = np.clip(np.floor((anc[:, a] - lo[a]) / size[a]).astype(np.int64), 0,
+                                ncell[a] - 1)
+    nx, ny, nz = ncell
+    lock_of = ((idx[:, 0] * ny + idx[:, 1]) * nz + idx[:, 2]).astype(np.int32)
+    nregions = int(nx * ny * nz)
+    # neighbours: for every cell and periodic image, the cells whose boxes lie within c
+    img_pos, img_vel, half, full = domain.images(time)
+    ii, jj, kk = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    cells = np.stack([ii.ravel(), jj.ravel(), kk.ravel()], 1)
+    cell_lo = lo + cells * size
+    cell_hi = cell_lo + size
+    glo = lo
+    ghi = lo + ncell * size
+    us, vs = [], []
+    stencil = [np.array(d) for d in np.ndindex(*([4] * dims))]
+    for img in full:
+        off = img_pos[img].copy()
+        if dims == 2:
+            off[2] = 0.0
+        # cells whose box, moved by -off, still comes within c of the grid
+        slo = cell_lo - off
+        shi = cell_hi - off
+        sel = np.ones(len(cells), bool)
+        for a in range(dims):
+            sel &= (shi[:, a] >= glo[a] - c) & (slo[:, a] <= ghi[a] + c)
+        if not sel.any():
+            continue
+        a_all = np.flatnonzero(sel)
+        base = np.floor((slo[sel] - lo) / size).astype(np.int64)
+        for d in stencil:
+            other = base.copy()
+            other[:, :dims] += d - 1  # offsets -1 .. 2 around where the moved box starts
+            if dims == 2:
+                other[:, 2] = 0
+            ok = np.ones(len(a_all), bool)
+            for a in range(3):
+                ok &= (other[:, a] >= 0) & (other[:, a] < ncell[a])
+            if not ok.any():
+                continue
+            o = other[ok]
+            a_id = a_all[ok]
+            olo = lo + o * size + off
+            ohi = olo + size
+            gap = np.maximum(0.0, np.maximum(cell_lo[a_id] - ohi, olo - cell_hi[a_id]))
+            if dims == 2:
+                gap[:, 2] = 0.0
+            near = (gap ** 2).sum(1) <= c * c
+            a_id = a_id[near]
+            b = o[near]
+            b_id = (b[:, 0] * ny + b[:, 1]) * nz + b[:, 2]
+            keep = a_id != b_id
+            us.append(np.minimum(a_id[keep], b_id[keep]))
+            vs.append(np.maximum(a_id[keep], b_id[keep]))
+    u = np.concatenate(us) if us else np.zeros(0, np.int64)
+    v = np.concatenate(vs) if vs else np.zeros(0, np.int64)
+    loff, ladj = _csr(nregions, u, v)
+    boxes = np.concatenate([cell_lo, cell_hi], 1)
+    kind = "grid" if dims == 2 else "grid3d"
+    return LockRegions(kind, lock_of, loff, ladj, boxes,
+                       {"cell": size[:dims].tolist(), "cells": ncell[:dims].tolist()})
