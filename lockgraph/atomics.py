@@ -136,6 +136,18 @@ def float_bits(typingctx, x):
 
 
 @intrinsic
+def bits_float(typingctx, x):
+    """The float64 whose IEEE-754 bits are the int64 x (inverse of float_bits)."""
+    if x != types.int64:
+        raise TypeError("bits_float takes an int64")
+
+    def codegen(context, builder, sig, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(x), codegen
+
+
+@intrinsic
 def cycles(typingctx):
     """The CPU's cycle counter (llvm.readcyclecounter): cheap timing inside kernels."""
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from . import kernels as K
 from . import locks as L
-from .parallel import Workers, cycles_per_second
+from .events import build_queue
+from .parallel import INTERIOR, Workers, classify_regions, cycles_per_second
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -67,12 +68,15 @@ class Engine:
     policy : "exact" | "paper" — exact: causality violations are detected and
         the step redone sequentially, so results equal the sequential engine's
         bit for bit; paper: the paper's rule, violations only counted.
-    maxskip : int — blocked events a thread may pass over to find a free one.
+    window_events : float — how far an interior event may run ahead of the
+        other threads' domains, in units of a domain's mean time between events.
+    stall_seconds : float — a step in which no thread completes an event for
+        this long stops with an error (never a hang).
     """
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
-                 threads=1, lock="graph", scale=4.0, policy="exact", maxskip=8,
+                 threads=1, lock="graph", scale=4.0, policy="exact", window_events=8.0,
                  stall_seconds=60.0):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
@@ -106,7 +110,9 @@ class Engine:
         self.lock = lock
         self.scale = scale
         self.policy = policy
-        self.workers = Workers(self.threads, maxskip, stall_seconds) if self.threads > 1 else None
+        self.workers = (Workers(self.threads, window_events, stall_seconds)
+                        if self.threads > 1 else None)
+        self.last_events = 0.0
         self.repairs = 0
         self.lock_stats = None
         hill = physics.hill
@@ -268,6 +274,7 @@ class Engine:
         if hill is not None:
             kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
         self._accumulate(st)
+        self.last_events = float(st[K.S_POPS])
         self.steps_done += 1
         return st
 
@@ -334,7 +341,7 @@ class Engine:
         self.search_visits += self.search_work[0]
         self.search_tests += self.search_work[1]
         build_csr(n, npairs, self.out_a, self.out_e, self.noff, self.nent)
-        K.reset_step(self.tl, self.cis, self.xhead, self.ctr)
+        K.reset_step(self.tl, self.cis, self.xhead, self.ctr, self.hidden)
 
     def _drift_phase(self):
         ph = self.physics
@@ -415,17 +422,60 @@ class Engine:
         return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
                             self.time, dims)
 
+    def _domains(self):
+        """Slot ranges of the T domains: the tree's nodes at depth ceil(log2 T),
+        left to right, merged down to T (spatial blocks of about N/T particles)."""
+        t = self.threads
+        depth = max(0, math.ceil(math.log2(t)))
+        ranges = []
+        stack = [(0, 0)]
+        while stack:
+            nd, dep = stack.pop()
+            left = self.ntop[nd, 0]
+            if dep == depth or left < 0:
+                ranges.append((int(self.ntop[nd, 2]), int(self.ntop[nd, 3])))
+                continue
+            stack.append((int(self.ntop[nd, 1]), dep + 1))
+            stack.append((int(left), dep + 1))
+        ranges.sort()
+        while len(ranges) > t:  # merge the smallest neighbouring pair
+            k = min(range(len(ranges) - 1), key=lambda q: ranges[q + 1][1] - ranges[q][0])
+            ranges[k:k + 2] = [(ranges[k][0], ranges[k + 1][1])]
+        while len(ranges) < t:
+            ranges.append((self.n, self.n))
+        dlo = np.array([r[0] for r in ranges], np.int64)
+        dhi = np.array([r[1] for r in ranges], np.int64)
+        return dlo, dhi
+
     def _events_parallel(self, st, img_pos, img_vel, half, full):
         regions = self.build_locks(img_pos, half)
         self.lock_stats = regions.stats()
         locks = (regions.lock_of, regions.loff, regions.ladj)
         r = regions.count
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
+        dlo, dhi = self._domains()
+        dom = np.zeros(r, np.int64)
+        bd = np.zeros(r, np.int64)
+        classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
+                         np.zeros(r, np.int64))
+        q = tournament_size(int((dhi - dlo).max()))
+        dtour_t = np.full((self.threads, 2 * q), np.inf)
+        dtour_s = np.full((self.threads, 2 * q), -1, np.int32)
+        for d in range(self.threads):
+            build_queue(dtour_t[d], dtour_s[d], self.evt, self.ids, self.hidden, dlo[d], dhi[d])
+        doms = (dom, bd, dlo, dhi, dtour_t, dtour_s)
+        interior = np.isin(regions.lock_of, np.flatnonzero(bd >= INTERIOR))
+        self.lock_stats["interior_fraction"] = float(interior.mean()) if self.n else 0.0
+        # how far an interior event may run ahead of the other domains: a few of
+        # one domain's typical gaps between events (from the last step)
+        per_domain = max(self.last_events / self.threads, 1.0)
+        window = self.workers.window_events * self.dt / per_domain
         stt = np.zeros((self.threads, K.NSTAT))
+        wall0 = self.workers.wall_s
         try:
             while True:
                 bundles = self._bundles(img_pos, img_vel, full)
-                status = self.workers.run(bundles, stt, locks, lstate)
+                status = self.workers.run(bundles, stt, locks, lstate, doms, window)
                 if status in (K.NEED_JOURNAL, K.NEED_LOG):
                     self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
                     continue
@@ -437,6 +487,7 @@ class Engine:
                 st += row
                 st[K.S_MAXOV] = m
                 st[K.S_MAXCIS] = c
+            st[K.S_ECYC] += (self.workers.wall_s - wall0) * cycles_per_second()
 
     def _rollback(self):
         K.rollback(self.pos, self.vel, self.tl, self.ncoll, self.tlast, self.anc, self.cis,

@@ -33,7 +33,7 @@ BUCKET = 1 << BUCKET_BITS
 
 
 def tournament_size(n):
-    """Q: the number of leaves (a power of two >= the number of buckets)."""
+    """Q: the number of leaves (a power of two >= the number of buckets of n slots)."""
     buckets = (max(n, 1) + BUCKET - 1) // BUCKET
     q = 1
     while q < buckets:
@@ -66,12 +66,13 @@ def earlier(a, b, evt, ids):
 
 
 @kernel(inline=True)
-def _bucket_min(evt, ids, hidden, b, n):
-    lo = b << BUCKET_BITS
-    hi = min(lo + BUCKET, n)
+def _bucket_min(evt, ids, hidden, lo, hi, b):
+    """Earliest event of bucket b of the slot range lo..hi-1."""
+    first = lo + (b << BUCKET_BITS)
+    last = min(first + BUCKET, hi)
     bt = np.inf
     bs = -1
-    for k in range(lo, hi):
+    for k in range(first, last):
         if hidden[k] == 0 and key_less(evt[k], k, bt, bs, ids):
             bt = evt[k]
             bs = k
@@ -79,10 +80,11 @@ def _bucket_min(evt, ids, hidden, b, n):
 
 
 @kernel
-def build_queue(tour_t, tour_s, evt, ids, hidden, n):
+def build_queue(tour_t, tour_s, evt, ids, hidden, lo, hi):
+    """Build the tournament over slots lo..hi-1 (a domain; the whole system: 0..N)."""
     q = tour_t.shape[0] >> 1
     for b in range(q):
-        t, s = _bucket_min(evt, ids, hidden, b, n)
+        t, s = _bucket_min(evt, ids, hidden, lo, hi, b)
         tour_t[q + b] = t
         tour_s[q + b] = s
     for k in range(q - 1, 0, -1):
@@ -94,15 +96,15 @@ def build_queue(tour_t, tour_s, evt, ids, hidden, n):
 
 
 @kernel(inline=True)
-def update_queue(tour_t, tour_s, evt, ids, hidden, i):
-    """Restore the tournament after evt[i] changed.
+def update_queue(tour_t, tour_s, evt, ids, hidden, lo, hi, i):
+    """Restore the tournament of slots lo..hi-1 after evt[i] (or hidden[i]) changed.
 
     Recomputes i's bucket, then climbs; stops at the first node whose winner
     (time and slot) is unchanged — nothing above it can change either.
     """
     q = tour_t.shape[0] >> 1
-    b = i >> BUCKET_BITS
-    t, s = _bucket_min(evt, ids, hidden, b, evt.shape[0])
+    b = (i - lo) >> BUCKET_BITS
+    t, s = _bucket_min(evt, ids, hidden, lo, hi, b)
     k = q + b
     if tour_t[k] == t and tour_s[k] == s and s != i:
         return

@@ -57,7 +57,8 @@ I_LAW, I_DISH, I_CAP, I_PAPER = range(4)
 NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
- S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT) = range(18)
+ S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT,
+ S_ECYC) = range(19)
 NSTAT = 24
 # status codes
 OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL = range(9)
@@ -453,7 +454,7 @@ def init_events(parts, nbrs, evq, cfg, st):
             if t < evt[i]:
                 evt[i] = t
                 evp[i] = CYLINDER
-    build_queue(tour_t, tour_s, evt, ids, hidden, n)
+    build_queue(tour_t, tour_s, evt, ids, hidden, 0, n)
 
 
 @kernel(inline=True)
@@ -508,9 +509,9 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, max_events):
         status, j = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
         if status != OK:
             return status
-        update_queue(tour_t, tour_s, evt, ids, hidden, i)
+        update_queue(tour_t, tour_s, evt, ids, hidden, 0, evt.shape[0], i)
         if j >= 0:
-            update_queue(tour_t, tour_s, evt, ids, hidden, j)
+            update_queue(tour_t, tour_s, evt, ids, hidden, 0, evt.shape[0], j)
         done += 1
     return CHUNK
 
@@ -559,9 +560,10 @@ def compute_reach(pos, vel, rad, reach, par, extra, top):
 
 
 @kernel
-def reset_step(tl, cis, xhead, ctr):
+def reset_step(tl, cis, xhead, ctr, hidden):
     tl[:] = 0.0
     cis[:] = 0
+    hidden[:] = 0
     xhead[:] = -1
     ctr[XCOUNT] = 0
     ctr[JCOUNT] = 0

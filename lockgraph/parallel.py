@@ -1,37 +1,40 @@
-"""Threaded event processing under spatial locks.
+"""Threaded event processing: spatial domains, lock regions, verified causality.
 
 T Python threads each call ``worker`` once per step; the kernel runs without
 the GIL and processes events until the step is done (whole runs of events per
-call).  Shared words live in ``ctrl`` (int64, one cache line apart):
+call).  Particles are stored in kD-tree order, so the tree's top splits cut the
+slot range into T *domains* — spatial blocks.  Thread d owns domain d: its own
+time-ordered queue (a tournament over its slots), its own lock.
 
-* ``QLOCK`` — spinlock guarding the event queue and the region lock states;
-* ``INFLIGHT`` — events claimed and not yet committed;
-* ``ABORT`` / ``STATUS`` — stop request and the first error status;
-* ``PROGRESS`` — committed events (for stall detection);
-* ``HIGH`` — the latest event time claimed so far (float bits).
+Every event's lock regions (those of its two particles, from the lock graph or
+the grid) are classified with ``bd``, the lock-graph distance to the nearest
+region of another domain (0 for a region mixing domains):
 
-Claim (under QLOCK): take the earliest event whose lock regions (those of its
-two particles) are clear of every event in flight — the paper's rule: not the
-same region nor adjacent (lock-graph distance >= 2) — skipping blocked events
-(at most ``maxskip``, put back afterwards).  Under the exact policy "clear"
-means distance >= 3: the neighbourhoods do not touch, so not even the event an
-in-flight one creates next can reach what the claimed one reads or writes.
-The slot is hidden from the queue while in flight.  Process (no lock): the same
-``process_event`` as the sequential engine.  Commit (under QLOCK): queue
-updates, regions released.
+* **interior** events (both regions in d, ``bd >= 4``): nothing any other
+  thread does can reach what they read or write — other threads' events stay
+  at distance >= 3 — so they run with no global lock at all;
+* **boundary** events take the global lock ``G``, run only in global time order
+  (not later than any other domain's next event: ``clock``) and only at
+  lock-graph distance >= 3 from every other boundary event in flight (the
+  paper's rule, free lock regions around the event, extended by one ring:
+  ``held`` / ``near`` counters).
 
-Causality.  Two events can only interact if their lock regions are within
-distance one (the writer's regions touch the reader's neighbourhood).  Each
-region keeps ``ts``: the latest time of an event that had it as its own.  An
-event claimed in time order (not earlier than every event claimed before it)
-cannot conflict with anything processed already; an event claimed out of order
-(an earlier event created after later ones ran — a chain of follow-ups that
-outran the distance rule) is checked: a later time on its regions or their
-neighbours is a causality violation.  Under the exact policy the step then
-stops and is redone sequentially (a repair); under the paper policy it is
-counted.  A widened reach joining non-adjacent regions is a violation too.
-Without violations every event reads and writes what it would sequentially,
-so the state is bitwise the sequential one.
+Interior events may run ahead of the other domains by at most ``window`` (s).
+
+**Causality.**  Two events can interact only if their regions are within
+distance one.  Each region keeps ``ts``, the latest time of an event that had
+it as its own.  An event that is late (earlier than an event already processed
+nearby: earlier than its domain's latest, or any boundary event) is checked:
+a later time on its regions or their neighbours is a causality violation.
+Under the exact policy the step then stops and is redone sequentially (a
+repair); under the paper policy (distance >= 2, no time order, no window) it is
+only counted.  A widened reach joining non-adjacent regions is a violation
+too.  Without violations every event reads and writes exactly what it would in
+the sequential engine, so the state is bitwise the sequential one.
+
+Shared words: ``ctrl`` (G, ABORT, STATUS: one cache line each) and ``dctl``
+(per domain: its lock, and on another line its clock, in-flight count and
+progress).
 """
 import functools
 import time
@@ -39,15 +42,23 @@ import time
 import numpy as np
 
 from ._jit import kernel
-from .atomics import cpu_relax, cycles, fetch_add, fetch_max, float_bits, load, sched_yield
+from .atomics import bits_float, cpu_relax, cycles, float_bits, load, sched_yield
 from .atomics import spin_lock, spin_unlock, store, cas
 from .events import update_queue
+from .predict import INF
 from .kernels import (I_PAPER, NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
                       S_VIOL, S_WAIT, STALL, VIOLATION, process_event)
 from .neighbors import JCOUNT, LCOUNT
 
-QLOCK, INFLIGHT, ABORT, STATUS, PROGRESS, HIGH = 0, 8, 16, 24, 32, 40
-NCTRL = 56
+G, ABORT, STATUS = 0, 8, 16
+NCTRL = 24
+DLOCK, DCLOCK, DINFL, DPROG = 0, 8, 9, 10  # per-domain row of dctl
+NDCTL = 16
+# Regions this far (in lock-graph hops) from any other domain's are interior.  A
+# boundary event's regions are at most one hop across the cut (its particles may
+# meet), so 4 keeps every interior event >= 3 hops from every other thread's
+# events: not even their next events can reach each other.
+INTERIOR = 4
 
 
 @kernel
@@ -64,13 +75,54 @@ def cycles_per_second():
     return (c1 - c0) / (t1 - t0)
 
 
+@kernel
+def classify_regions(lock_of, loff, ladj, dlo, dhi, dom, bd, queue):
+    """dom[r]: the domain of region r's particles (-1 if they span several);
+    bd[r]: lock-graph distance from r to the nearest region of another domain
+    (0 for a mixed region), by breadth-first search; capped at 64."""
+    nreg = dom.shape[0]
+    ndom = dlo.shape[0]
+    for r in range(nreg):
+        dom[r] = -2
+        bd[r] = 64
+    for d in range(ndom):
+        for s in range(dlo[d], dhi[d]):
+            r = lock_of[s]
+            if dom[r] == -2:
+                dom[r] = d
+            elif dom[r] != d:
+                dom[r] = -1
+    head = 0
+    tail = 0
+    for r in range(nreg):
+        if dom[r] == -1:
+            bd[r] = 0
+            queue[tail] = r
+            tail += 1
+            continue
+        for k in range(loff[r], loff[r + 1]):
+            if dom[ladj[k]] != dom[r]:
+                bd[r] = 1
+                queue[tail] = r
+                tail += 1
+                break
+    while head < tail:
+        r = queue[head]
+        head += 1
+        for k in range(loff[r], loff[r + 1]):
+            x = ladj[k]
+            if bd[x] > bd[r] + 1:
+                bd[x] = bd[r] + 1
+                queue[tail] = x
+                tail += 1
+
+
 @kernel(inline=True)
 def _clear(held, near, loff, ladj, a, far):
     """Region a at lock-graph distance >= 2 (far: >= 3) from every busy region?
 
-    ``held[x]`` counts busy events owning region x, ``near[x]`` busy events
-    with x in the closed neighbourhood of one of their regions: distance >= 2
-    means no held region in a's closed neighbourhood, distance >= 3 no near one.
+    ``held[x]`` counts boundary events in flight owning region x, ``near[x]``
+    those with x in the closed neighbourhood of one of their regions.
     """
     c = near if far else held
     if c[a] != 0:
@@ -83,7 +135,6 @@ def _clear(held, near, loff, ladj, a, far):
 
 @kernel(inline=True)
 def _busy(held, near, loff, ladj, a, d):
-    """Add (d = 1) or remove (d = -1) region a as busy."""
     held[a] += d
     near[a] += d
     for k in range(loff[a], loff[a + 1]):
@@ -114,99 +165,158 @@ def _fail(ctrl, status):
     store(ctrl, ABORT, 1)
 
 
-@kernel
-def worker(tid, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, ctrl, batch, skipped,
-           stall_cycles):
-    """One thread's share of a step's events.  Returns its final status.
+@kernel(inline=True)
+def _publish(dctl, d, tour_t, tour_s):
+    """Publish domain d's clock: the time of its next event (its queue's root)."""
+    t = tour_t[1] if tour_s[1] >= 0 else INF
+    store(dctl, d * NDCTL + DCLOCK, float_bits(t))
 
-    ``lstate = (ts, held, near)`` per region (see the module docstring; the
-    counters are used under QLOCK only).  ``batch`` (B, 6) int64, this thread's
-    own: slot, partner written, late flag, claim time's bits and the two
-    regions of each event of its batch.  ``skipped`` (maxskip, 3): scratch for
-    the events passed over in a scan.
+
+@kernel(inline=True)
+def _others_clock(dctl, d, ndom):
+    """The earliest next event of the other domains (bits of a float)."""
+    m = float_bits(INF)
+    for e in range(ndom):
+        if e != d:
+            c = load(dctl, e * NDCTL + DCLOCK)
+            if c < m:
+                m = c
+    return m
+
+
+@kernel(inline=True)
+def _all_done(dctl, ndom, dtb):
+    for e in range(ndom):
+        if load(dctl, e * NDCTL + DCLOCK) < dtb:
+            return False
+        if load(dctl, e * NDCTL + DINFL) != 0:
+            return False
+    return True
+
+
+@kernel(inline=True)
+def _domain_of(dlo, x):
+    d = dlo.shape[0] - 1
+    while d > 0 and x < dlo[d]:
+        d -= 1
+    return d
+
+
+@kernel(inline=True)
+def _all_idle(dctl, ndom):
+    for e in range(ndom):
+        if load(dctl, e * NDCTL + DINFL) != 0:
+            return False
+    return True
+
+
+@kernel
+def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, ctrl, dctl,
+           window, stall_cycles):
+    """Thread d's share of a step: the events of domain d.  Returns its final status.
+
+    ``lstate = (ts, held, near)`` per region; ``doms = (dom, bd, dlo, dhi,
+    dtour_t, dtour_s)``: the regions' classification, the domains' slot
+    ranges and their queues (row d is domain d's tournament).
     """
     ids = parts[7]
     ctr = nbrs[5]
-    evt, evp, evc, tour_t, tour_s, hidden = evq
+    evt, evp, evc, tour_t_, tour_s_, hidden = evq
     jslot = jour[0]
     logt = jour[3]
     par = cfg[0]
     ipar = cfg[1]
     dt = par[P_DT]
+    dtb = float_bits(dt)
     paper = ipar[I_PAPER] != 0
     far = not paper
     lock_of, loff, ladj = locks
     ts, held, near = lstate
-    nb_max = batch.shape[0]
-    maxskip = skipped.shape[0]
+    dom, bd, dlo, dhi, dtour_t, dtour_s = doms
+    ndom = dlo.shape[0]
+    lo = dlo[d]
+    hi = dhi[d]
+    tt = dtour_t[d]
+    tsl = dtour_s[d]
+    myl = d * NDCTL + DLOCK
+    high = 0  # latest event time processed in this domain (bits)
     waiting = False
     wait_from = 0
-    seen_progress = -1
+    seen = -1
     while True:
         if load(ctrl, ABORT) != 0:
             return OK
-        spin_lock(ctrl, QLOCK)
-        inflight = ctrl[INFLIGHT]
-        # room for every event in flight: at most two journal and one log entry each
-        room = ctr[JCOUNT] + 2 * (inflight + nb_max) <= jslot.shape[0]
-        if logt.shape[0] > 0 and ctr[LCOUNT] + inflight + nb_max > logt.shape[0]:
-            room = False
-        nb = 0
-        nskip = 0
-        empty = False
-        while room and nb < nb_max:
-            i = tour_s[1]
-            if i < 0 or not tour_t[1] < dt:
-                empty = True
-                break
+        # room in the journal and the log for one more event of every domain
+        if ctr[JCOUNT] + 2 * ndom + 2 > jslot.shape[0] or (
+                logt.shape[0] > 0 and ctr[LCOUNT] + ndom + 1 > logt.shape[0]):
+            if _all_idle(dctl, ndom):
+                _fail(ctrl, NEED_JOURNAL if ctr[JCOUNT] + 2 * ndom + 2 > jslot.shape[0]
+                      else NEED_LOG)
+                return OK
+            go = False
+        else:
+            go = True
+        spin_lock(dctl, myl)
+        i = tsl[1]
+        empty = i < 0 or not tt[1] < dt
+        blocked = True
+        boundary = False
+        if go and not empty:
+            t = tt[1]
+            tb = float_bits(t)
             p = evp[i]
+            j = p >> 5 if p >= 0 else -1
             a1 = lock_of[i]
-            a2 = lock_of[p >> 5] if p >= 0 else a1
-            # clear of every claimed event (all threads, this batch so far) and,
-            # under the exact policy, of the events passed over in this scan
-            if _clear(held, near, loff, ladj, a1, far) and _clear(held, near, loff, ladj, a2, far):
-                _busy_pair(held, near, loff, ladj, a1, a2, 1)
-                batch[nb, 4] = a1
-                batch[nb, 5] = a2
-                tb = float_bits(tour_t[1])
-                batch[nb, 0] = i
-                batch[nb, 2] = 1 if tb < ctrl[HIGH] else 0
-                batch[nb, 3] = tb
-                if tb > ctrl[HIGH]:
-                    ctrl[HIGH] = tb
-                nb += 1
+            a2 = lock_of[j] if j >= 0 else a1
+            if dom[a1] == d and dom[a2] == d and bd[a1] >= INTERIOR and bd[a2] >= INTERIOR:
+                if paper or t <= bits_float(_others_clock(dctl, d, ndom)) + window:
+                    blocked = False
+                    hidden[i] = 1
+                    update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
+                    store(dctl, d * NDCTL + DINFL, 1)
+                    _publish(dctl, d, tt, tsl)
             else:
-                st[S_BLOCKED] += 1
-                if nskip >= maxskip:
-                    break
-                skipped[nskip, 0] = a1
-                skipped[nskip, 1] = a2
-                skipped[nskip, 2] = i
-                nskip += 1
-                if far:  # what is passed over must stay clear of what is taken
+                # a boundary event: look before taking the global lock
+                boundary = paper or tb <= _others_clock(dctl, d, ndom)
+        spin_unlock(dctl, myl)
+        if boundary:
+            blocked = True
+            spin_lock(ctrl, G)
+            spin_lock(dctl, myl)
+            # under G nobody else changes this queue: look at its root again
+            i = tsl[1]
+            empty = i < 0 or not tt[1] < dt
+            if not empty:
+                t = tt[1]
+                tb = float_bits(t)
+                p = evp[i]
+                j = p >> 5 if p >= 0 else -1
+                a1 = lock_of[i]
+                a2 = lock_of[j] if j >= 0 else a1
+                ordered = paper or tb <= _others_clock(dctl, d, ndom)
+                if ordered and _clear(held, near, loff, ladj, a1, far) and \
+                        _clear(held, near, loff, ladj, a2, far):
+                    blocked = False
                     _busy_pair(held, near, loff, ladj, a1, a2, 1)
-            hidden[i] = 1  # out of the queue: in flight, or passed over for now
-            update_queue(tour_t, tour_s, evt, ids, hidden, i)
-        for q in range(nskip):  # put back what was passed over
-            s_ = skipped[q, 2]
-            hidden[s_] = 0
-            update_queue(tour_t, tour_s, evt, ids, hidden, s_)
-            if far:
-                _busy_pair(held, near, loff, ladj, skipped[q, 0], skipped[q, 1], -1)
-        if nb == 0:
-            if inflight == 0 and (empty or not room):
-                spin_unlock(ctrl, QLOCK)
-                if not room:
-                    _fail(ctrl, NEED_LOG if logt.shape[0] > 0 and
-                          ctr[LCOUNT] + 1 > logt.shape[0] else NEED_JOURNAL)
-                return OK  # nothing left: the step's events are done
-            spin_unlock(ctrl, QLOCK)
+                    hidden[i] = 1
+                    update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
+                    store(dctl, d * NDCTL + DINFL, 1)
+                    _publish(dctl, d, tt, tsl)
+            spin_unlock(dctl, myl)
+            spin_unlock(ctrl, G)
+        if blocked:
+            if empty and _all_done(dctl, ndom, dtb):
+                return OK
+            if not empty:
+                st[S_BLOCKED] += 1
             now = cycles()
-            prog = load(ctrl, PROGRESS)
-            if not waiting or prog != seen_progress:
+            prog = 0
+            for e in range(ndom):
+                prog += load(dctl, e * NDCTL + DPROG)
+            if not waiting or prog != seen:
                 waiting = True
                 wait_from = now
-                seen_progress = prog
+                seen = prog
             elif now - wait_from > stall_cycles:
                 _fail(ctrl, STALL)
                 return STALL
@@ -215,52 +325,60 @@ def worker(tid, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, ctrl
             st[S_WAIT] += cycles() - now
             continue
         waiting = False
-        ctrl[INFLIGHT] = inflight + nb
-        st[S_CONC] += nb * (inflight + nb)
-        st[S_CLAIMS] += nb
-        spin_unlock(ctrl, QLOCK)
-
+        c0 = cycles()
         status = OK
-        for k in range(nb):
-            batch[k, 1] = -1
-            if status != OK:
-                continue  # after an error the rest only go back to the queue
-            i = batch[k, 0]
-            tb = batch[k, 3]
-            t = evt[i]
-            a1 = batch[k, 4]
-            a2 = batch[k, 5]
-            # causality: only an event claimed out of time order can conflict with
-            # one processed already, and only if their regions are within distance one
-            if batch[k, 2] != 0 and (_touched_later(ts, loff, ladj, a1, tb)
-                                     or _touched_later(ts, loff, ladj, a2, tb)):
-                st[S_VIOL] += 1
-                if not paper:
-                    status = VIOLATION
-                    continue
-            status, j = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
-            batch[k, 1] = j
-            # the regions are this thread's own while in flight: plain writes
-            if ts[a1] < tb:
-                ts[a1] = tb
-            if ts[a2] < tb:
-                ts[a2] = tb
-
-        spin_lock(ctrl, QLOCK)
-        for k in range(nb):
-            i = batch[k, 0]
-            hidden[i] = 0
-            update_queue(tour_t, tour_s, evt, ids, hidden, i)
-            j = batch[k, 1]
-            if j >= 0:
-                update_queue(tour_t, tour_s, evt, ids, hidden, j)
-            _busy_pair(held, near, loff, ladj, batch[k, 4], batch[k, 5], -1)
-        ctrl[INFLIGHT] -= nb
-        ctrl[PROGRESS] += nb
-        spin_unlock(ctrl, QLOCK)
+        jw = -1
+        # causality: an event later than one processed nearby is checked
+        if (boundary or tb < high) and (_touched_later(ts, loff, ladj, a1, tb)
+                                        or _touched_later(ts, loff, ladj, a2, tb)):
+            st[S_VIOL] += 1
+            if not paper:
+                status = VIOLATION
+        if status == OK:
+            status, jw = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
+        if ts[a1] < tb:
+            ts[a1] = tb
+        if ts[a2] < tb:
+            ts[a2] = tb
+        if tb > high:
+            high = tb
+        st[S_CONC] += cycles() - c0
+        st[S_CLAIMS] += 1
+        # commit: the queues of the slots whose events changed
+        if boundary:
+            spin_lock(ctrl, G)
+        spin_lock(dctl, myl)
+        hidden[i] = 0
+        update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
+        if jw >= 0:
+            e = _domain_of(dlo, jw)
+            if e == d:
+                update_queue(tt, tsl, evt, ids, hidden, lo, hi, jw)
+            else:  # a partner across the cut: its domain's queue, under its lock
+                spin_lock(dctl, e * NDCTL + DLOCK)
+                update_queue(dtour_t[e], dtour_s[e], evt, ids, hidden, dlo[e], dhi[e], jw)
+                _publish(dctl, e, dtour_t[e], dtour_s[e])
+                spin_unlock(dctl, e * NDCTL + DLOCK)
+        _publish(dctl, d, tt, tsl)
+        store(dctl, d * NDCTL + DINFL, 0)
+        store(dctl, d * NDCTL + DPROG, load(dctl, d * NDCTL + DPROG) + 1)
+        spin_unlock(dctl, myl)
+        if boundary:
+            _busy_pair(held, near, loff, ladj, a1, a2, -1)
+            spin_unlock(ctrl, G)
         if status != OK:
             _fail(ctrl, status)
             return status
+
+
+@kernel
+def idle_until_abort(ctrl):
+    """Tests: a worker that never processes an event (its domain's clock stands
+    still), so the others can only stall — and must say so."""
+    while load(ctrl, ABORT) == 0:
+        cpu_relax()
+        sched_yield()
+    return OK
 
 
 class Workers:
@@ -271,43 +389,52 @@ class Workers:
     event (through ``ABORT``) and is re-raised in the caller with its traceback.
     """
 
-    def __init__(self, threads, maxskip=8, stall_seconds=60.0, batch=8):
+    def __init__(self, threads, window_events=8.0, stall_seconds=60.0):
         from concurrent.futures import ThreadPoolExecutor
 
         self.threads = threads
-        self.maxskip = maxskip
+        self.window_events = float(window_events)
         self.stall_cycles = int(stall_seconds * cycles_per_second())
         self.pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lockgraph")
         self.ctrl = np.zeros(NCTRL, np.int64)
-        self.batch = np.zeros((threads, batch, 6), np.int64)
-        self.skipped = np.zeros((threads, max(maxskip, 0), 3), np.int64)
-        self.fault = None  # tests: a thread index that raises instead of working
+        self.dctl = np.zeros(threads * NDCTL, np.int64)
+        self.fault = None  # tests: a thread that raises (d) or never works (("stall", d))
+        self.wall_s = 0.0
 
     def close(self):
         self.pool.shutdown(wait=True)
 
-    def run(self, bundles, stt, locks, lstate):
+    def run(self, bundles, stt, locks, lstate, doms, window):
         """Run the workers until the step's events are done or one stops with a
         status; returns that status (OK when all is done)."""
         from concurrent.futures import wait
 
         self.ctrl[:] = 0
-        futures = [self.pool.submit(self._one, tid, bundles, stt, locks, lstate)
-                   for tid in range(self.threads)]
+        dom, bd, dlo, dhi, dtour_t, dtour_s = doms
+        self.dctl[:] = 0
+        for d in range(self.threads):  # each domain's clock: its next event
+            t = dtour_t[d][1] if dtour_s[d][1] >= 0 else np.inf
+            self.dctl[d * NDCTL + DCLOCK] = np.float64(t).view(np.int64)
+        t0 = time.perf_counter()
+        futures = [self.pool.submit(self._one, d, bundles, stt, locks, lstate, doms, window)
+                   for d in range(self.threads)]
         wait(futures)
+        self.wall_s += time.perf_counter() - t0
         for f in futures:
             exc = f.exception()
             if exc is not None:
                 raise exc
         return int(self.ctrl[STATUS])
 
-    def _one(self, tid, bundles, stt, locks, lstate):
+    def _one(self, d, bundles, stt, locks, lstate, doms, window):
         try:
-            if self.fault == tid:
-                raise RuntimeError(f"injected fault in worker thread {tid}")
+            if self.fault == d:
+                raise RuntimeError(f"injected fault in worker thread {d}")
+            if self.fault == ("stall", d):
+                return idle_until_abort(self.ctrl)
             parts, step, tree, nbrs, evq, jour, cfg = bundles
-            return worker(tid, parts, step, tree, nbrs, evq, jour, cfg, stt[tid], locks, lstate,
-                          self.ctrl, self.batch[tid], self.skipped[tid], self.stall_cycles)
+            return worker(d, parts, step, tree, nbrs, evq, jour, cfg, stt[d], locks, lstate, doms,
+                          self.ctrl, self.dctl, window, self.stall_cycles)
         except BaseException:
             self.ctrl[ABORT] = 1  # the others stop at their next event
             raise

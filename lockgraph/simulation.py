@@ -56,7 +56,8 @@ class Simulation:
     policy : "exact" | "paper" — exact (default): causality violations are
         detected and repaired, so any thread count gives the sequential result
         bit for bit; paper: the paper's rule, violations only counted.
-    maxskip : int — blocked events a thread may pass over to find a free one.
+    window_events : float — how far ahead of the other threads an interior event
+        may run (see ``Engine``).
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).
     copy : bool — with False the simulation takes over the state's arrays
         instead of copying them (for systems near the memory limit); the State
@@ -65,7 +66,7 @@ class Simulation:
 
     def __init__(self, state, physics, dt, *, threads=1, lock="graph", scale=4.0,
                  policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True,
-                 maxskip=8):
+                 window_events=8.0):
         if not isinstance(state, State):
             raise InputError("state", f"must be a lockgraph.State, got {type(state).__name__}")
         if not isinstance(physics, Physics):
@@ -75,7 +76,8 @@ class Simulation:
         self.compile_s = compile_kernels()
         self._engine = Engine(state, physics, dt, skin=skin, leaf_size=leaf_size,
                               collapse_limit=collapse_limit, copy=copy, threads=threads,
-                              lock=lock, scale=scale, policy=policy, maxskip=maxskip)
+                              lock=lock, scale=scale, policy=policy,
+                              window_events=window_events)
         self.threads = self._engine.threads
         self.lock = self._engine.lock
         self.scale = self._engine.scale
@@ -146,8 +148,8 @@ class Simulation:
             "scale": self.scale,
             "policy": self.policy,
             "events": int(t[K.S_POPS]),
-            "mean_concurrency": (float(t[K.S_CONC] / t[K.S_CLAIMS]) if t[K.S_CLAIMS] else
-                                 (1.0 if self.threads == 1 else 0.0)),
+            # time-averaged number of threads busy with events while they ran
+            "mean_concurrency": (float(t[K.S_CONC] / t[K.S_ECYC]) if t[K.S_ECYC] else 1.0),
             "blocked_picks": int(t[K.S_BLOCKED]),
             "violations": int(t[K.S_VIOL] + t[K.S_REACHOUT]),
             "repairs": self._engine.repairs,

@@ -1,0 +1,124 @@
+"""Lock regions (lock graph and grid) against brute force.
+
+Coverage: any two particles that may meet within the step — brute force over
+all pairs and periodic images with the engine's step-start anchors and reaches
+— lie in the same lock region or in adjacent ones.  Every particle has exactly
+one region (regions without neighbours included).  One class of checks, run
+for every scene and lock structure.
+"""
+import numpy as np
+import pytest
+
+from lockgraph import scenarios
+from lockgraph.engine import Engine
+
+SCENES = {
+    "ring": dict(n=800, params={"dispersion": 0.003, "dt": 60.0}),
+    "ring_moonlet": dict(n=900, params={"dispersion": 0.003, "dt": 60.0, "moonlet_radius": 8.0}),
+    "dish": dict(n=600, params={"cylinder_radius": 0.006, "dt": 0.0005, "spacing": 1.1}),
+    "dish_marble": dict(n=601, params={"cylinder_radius": 0.006, "marble_radius": 0.003,
+                                       "dt": 0.0005, "spacing": 1.1, "marble_gap": 0.0002}),
+    "gas": dict(n=864, params={"eta": 0.35}),
+}
+LOCKS = [("graph", 1.2), ("graph", 2.0), ("graph", 4.0), ("graph", 6.0), ("graph", 8.0),
+         ("grid", None), ("grid3d", None)]
+
+
+def step_structures(name, lock, scale, steps=3):
+    cfg = SCENES[name]
+    sc = scenarios.load(name, n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, lock=lock, scale=scale or 4.0, leaf_size=4)
+    for _ in range(steps):
+        eng.step()
+    img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
+    eng._setup(img_pos, img_vel, half)
+    return eng, eng.build_locks(img_pos, half), sc.physics.domain
+
+
+def brute_pairs(eng, domain):
+    img_pos, img_vel, half, full = domain.images(eng.time)
+    a_all, b_all = [], []
+    for img in full:
+        d = eng.anc[:, None, :] - eng.anc[None, :, :] - img_pos[img]
+        ok = (d ** 2).sum(-1) <= (eng.reach[:, None] + eng.reach[None, :]) ** 2
+        if img == 13:
+            np.fill_diagonal(ok, False)
+        a, b = np.nonzero(ok)
+        a_all.append(a)
+        b_all.append(b)
+    return np.concatenate(a_all), np.concatenate(b_all)
+
+
+@pytest.fixture(scope="module", params=[(s, lk, sc) for s in SCENES for lk, sc in LOCKS],
+                ids=lambda p: f"{p[0]}-{p[1]}-{p[2]}")
+def case(request):
+    name, lock, scale = request.param
+    eng, regions, domain = step_structures(name, lock, scale)
+    return name, lock, scale, eng, regions, domain
+
+
+class TestLockRegions:
+    def test_every_particle_has_one_region(self, case):
+        name, lock, scale, eng, regions, domain = case
+        assert regions.lock_of.shape == (eng.n,)
+        assert regions.lock_of.min() >= 0 and regions.lock_of.max() < regions.count
+
+    def test_adjacency_is_symmetric_without_self_loops(self, case):
+        *_, regions, domain = case
+        edges = set()
+        for r in range(regions.count):
+            for x in regions.ladj[regions.loff[r]:regions.loff[r + 1]]:
+                assert x != r
+                edges.add((r, int(x)))
+        assert all((b, a) in edges for a, b in edges)
+
+    def test_pairs_that_may_meet_are_covered(self, case):
+        name, lock, scale, eng, regions, domain = case
+        a, b = brute_pairs(eng, domain)
+        assert len(a) > 0
+        la, lb = regions.lock_of[a], regions.lock_of[b]
+        adjacent = np.array([regions.adjacent(x, y) for x, y in zip(la, lb)])
+        assert adjacent.all(), f"{(~adjacent).sum()} pairs in non-adjacent regions"
+
+    def test_stats(self, case):
+        *_, regions, domain = case
+        st = regions.stats()
+        assert st["regions"] == regions.count
+        assert 0 <= st["mean_degree"] <= st["max_degree"]
+
+
+def test_lock_graph_regions_are_tree_nodes_partitioning_the_slots():
+    eng, regions, domain = step_structures("gas", "graph", 4.0)
+    nodes = regions.info["lock_nodes"]
+    spans = sorted((int(eng.ntop[nd, 2]), int(eng.ntop[nd, 3])) for nd in nodes)
+    assert spans[0][0] == 0 and spans[-1][1] == eng.n
+    assert all(spans[k][1] == spans[k + 1][0] for k in range(len(spans) - 1))
+
+
+def test_larger_scale_gives_fewer_larger_regions():
+    counts = [step_structures("gas", "graph", s)[1].count for s in (1.2, 4.0, 8.0)]
+    assert counts[0] >= counts[1] >= counts[2]
+    assert counts[0] > counts[2]
+
+
+def test_big_body_makes_one_big_well_connected_region():
+    """The paper's Figure 3: the moonlet's lock node is large and has many edges."""
+    eng, regions, domain = step_structures("ring_moonlet", "graph", 2.0)
+    moon = int(np.argmax(eng.rad))
+    r = regions.lock_of[moon]
+    deg = regions.degrees()
+    assert deg[r] >= np.percentile(deg, 90)
+
+
+def test_a_region_without_neighbours_is_still_a_region():
+    """With SCALE large enough the whole moonlet patch is one lock node."""
+    eng, regions, domain = step_structures("ring_moonlet", "graph", 1000.0)
+    assert regions.count == 1 and regions.degrees()[0] == 0
+    assert (regions.lock_of == 0).all()
+
+
+def test_grid_neighbours():
+    eng, regions, domain = step_structures("gas", "grid", None)
+    assert set(regions.degrees()) == {8}
+    eng, regions, domain = step_structures("gas", "grid3d", None)
+    assert set(regions.degrees()) == {26}

@@ -1,0 +1,188 @@
+"""The threaded engine gives the sequential result, bit for bit, under the exact policy.
+
+For ring, ring_moonlet, dish and dish_marble, early and late, with grid locks
+and the lock graph at SCALE 1.2, 2, 4, 6 and 8, and 2 or 4 threads: the final
+state has the sequential engine's sha256 and every particle has the same
+sequence of collisions (partners and times).  The paper policy reports how many
+ordering violations it made and how far its state ended up.  Failures in a
+worker stop the run promptly and reach the caller; a stall is an error.
+"""
+import hashlib
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as hs
+
+from lockgraph import scenarios
+from lockgraph.domains import PeriodicCube
+from lockgraph.engine import Engine
+from lockgraph.errors import InputError, SimulationError
+from lockgraph.physics import Physics
+from lockgraph.restitution import Constant
+from lockgraph.simulation import Simulation
+from lockgraph.state import State
+
+SMALL = {
+    "ring": dict(n=500, params={"dispersion": 0.003, "dt": 60.0, "late_orbits": 0.2}),
+    "ring_moonlet": dict(n=700, params={"dispersion": 0.003, "dt": 60.0, "moonlet_radius": 6.0,
+                                        "late_orbits": 0.2}),
+    "dish": dict(n=400, params={"cylinder_radius": 0.005, "dt": 0.0005, "spacing": 1.2,
+                                "drop_height": 0.0003}),
+    "dish_marble": dict(n=401, params={"cylinder_radius": 0.005, "marble_radius": 0.003,
+                                       "dt": 0.0005, "spacing": 1.2, "drop_height": 0.0003,
+                                       "marble_gap": 0.0003}),
+}
+STEPS = {"ring": 20, "ring_moonlet": 12, "dish": 20, "dish_marble": 20}
+LOCKS = [("grid", 4.0), ("graph", 1.2), ("graph", 2.0), ("graph", 4.0), ("graph", 6.0),
+         ("graph", 8.0)]
+
+
+def per_particle_sequences(events):
+    """{particle id: [(step, t, partner, image from it)]} from an engine's event log."""
+    seq = {}
+    for step, t, a, b, img in events:
+        seq.setdefault(int(a), []).append((int(step), float(t), int(b), int(img)))
+        if b >= 0:
+            seq.setdefault(int(b), []).append((int(step), float(t), int(a), 26 - int(img)))
+    return {k: sorted(v) for k, v in seq.items()}
+
+
+def run(sc, steps, **opts):
+    eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, **opts)
+    try:
+        for _ in range(steps):
+            eng.step()
+        st = eng.state()
+        return st.sha256(), per_particle_sequences(eng.events()), eng, st
+    finally:
+        eng.close()
+
+
+@pytest.fixture(scope="module")
+def sequential():
+    """Sequential reference runs, computed once per scene and state."""
+    cache = {}
+
+    def get(name, which):
+        if (name, which) not in cache:
+            cfg = SMALL[name]
+            sc = scenarios.load(name, which, n=cfg["n"], params=cfg["params"])
+            cache[(name, which)] = (sc,) + run(sc, STEPS[name])[:2]
+        return cache[(name, which)]
+    return get
+
+
+@pytest.mark.parametrize("threads", [2, 4])
+@pytest.mark.parametrize("lock,scale", LOCKS, ids=[f"{k}-{s}" for k, s in LOCKS])
+@pytest.mark.parametrize("which", ["early", "late"])
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_exact_policy_equals_sequential(sequential, name, which, lock, scale, threads):
+    sc, want_hash, want_seq = sequential(name, which)
+    assert sum(len(v) for v in want_seq.values()) > 20  # the run has collisions to order
+    got_hash, got_seq, eng, _ = run(sc, STEPS[name], threads=threads, lock=lock, scale=scale)
+    assert got_hash == want_hash
+    assert got_seq == want_seq
+
+
+@pytest.mark.parametrize("name", ["dish", "ring_moonlet"])
+def test_paper_policy_reports_violations_and_distance(sequential, name):
+    sc, want_hash, _ = sequential(name, "early")
+    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=2, lock="graph", scale=2.0,
+                     policy="paper")
+    sim.run(STEPS[name])
+    ref = Simulation(sc.state, sc.physics, dt=sc.dt)
+    ref.run(STEPS[name])
+    s = sim.stats
+    assert s["violations"] >= 0 and s["repairs"] == 0
+    distance = float(np.abs(sim.state.pos - ref.state.pos).max())
+    assert np.isfinite(distance)
+    if s["violations"] == 0:
+        assert sim.state.sha256() == ref.state.sha256()
+    sim._engine.close()
+
+
+def random_gas(n, seed, radius_spread):
+    rng = np.random.default_rng(seed)
+    L = 12.0
+    pos = []
+    rad = []
+    while len(pos) < n:
+        p = rng.uniform(-L / 2, L / 2, 3)
+        r = 0.3 * (1 + radius_spread * rng.random())
+        if all(np.linalg.norm(((p - q) + L / 2) % L - L / 2) > r + s + 1e-6
+               for q, s in zip(pos, rad)):
+            pos.append(p)
+            rad.append(r)
+    vel = rng.normal(0, 1, (n, 3))
+    return State(np.array(pos), vel, np.array(rad), np.array(rad) ** 3)
+
+
+@given(hs.integers(20, 90), hs.integers(0, 10 ** 6), hs.floats(0.0, 3.0),
+       hs.sampled_from(["graph", "grid", "grid3d"]), hs.sampled_from([1.2, 2.0, 6.0]),
+       hs.sampled_from([2, 3]), hs.floats(0.3, 1.0))
+def test_random_scenes_exact(n, seed, spread, lock, scale, threads, e):
+    """Hypothesis: random small scenes give the sequential state under any locks."""
+    st = random_gas(n, seed, spread)
+    ph = Physics(PeriodicCube(12.0), (), Constant(e))
+    seq = Engine(st, ph, 0.05)
+    par = Engine(st, ph, 0.05, threads=threads, lock=lock, scale=scale)
+    try:
+        for _ in range(6):
+            seq.step()
+            par.step()
+        assert par.state().sha256() == seq.state().sha256()
+    finally:
+        par.close()
+
+
+def test_worker_failure_reaches_the_caller_promptly():
+    cfg = SMALL["dish"]
+    sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, threads=2, lock="graph")
+    try:
+        for _ in range(25):
+            eng.step()
+        before = eng.state()
+        eng.workers.fault = 1
+        t0 = time.perf_counter()
+        with pytest.raises(RuntimeError, match="injected fault in worker thread 1") as info:
+            eng.step()
+        assert time.perf_counter() - t0 < 10.0  # the other worker stopped promptly
+        assert info.traceback[-1].name == "_one"  # the original traceback
+        after = eng.state()
+        assert after.sha256() == before.sha256() and after.time == before.time
+        eng.workers.fault = None
+        eng.step()  # and the engine carries on
+    finally:
+        eng.close()
+
+
+def test_stall_becomes_an_error_not_a_hang():
+    cfg = SMALL["dish"]
+    sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, threads=2, lock="graph", stall_seconds=0.5)
+    try:
+        for _ in range(25):
+            eng.step()
+        before = eng.state()
+        eng.workers.fault = ("stall", 0)  # thread 0 takes its domain and never lets go
+        t0 = time.perf_counter()
+        with pytest.raises(SimulationError, match="stalled"):
+            eng.step()
+        assert time.perf_counter() - t0 < 30.0
+        assert eng.state().sha256() == before.sha256()
+    finally:
+        eng.close()
+
+
+def test_options_are_checked():
+    st = random_gas(20, 1, 0.0)
+    ph = Physics(PeriodicCube(12.0), (), Constant(1.0))
+    with pytest.raises(InputError, match="^lock: threads > 1 need lock regions"):
+        Engine(st, ph, 0.05, threads=2, lock="none")
+    with pytest.raises(InputError, match="^lock: unknown value 'octree'"):
+        Engine(st, ph, 0.05, threads=2, lock="octree")
+    with pytest.raises(InputError, match="^policy: unknown value"):
+        Engine(st, ph, 0.05, threads=2, policy="optimistic")
