@@ -72,12 +72,15 @@ class Engine:
         other threads' domains, in units of a domain's mean time between events.
     stall_seconds : float — a step in which no thread completes an event for
         this long stops with an error (never a hang).
+    trace_locks : list of (lock, scale) or None — record a trace for the
+        scheduling replay (sequential runs only): every event's particles, time
+        and cost, and each step's lock regions for each listed lock structure.
     """
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
                  threads=1, lock="graph", scale=4.0, policy="exact", window_events=8.0,
-                 stall_seconds=60.0):
+                 stall_seconds=60.0, trace_locks=None):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
@@ -115,6 +118,15 @@ class Engine:
         self.last_events = 0.0
         self.repairs = 0
         self.lock_stats = None
+        if trace_locks is not None and self.threads != 1:
+            raise InputError("trace_locks", "traces are recorded by sequential runs (threads=1)")
+        self.trace_locks = [(k, float(s) if k == "graph" else None) for k, s in (trace_locks or [])]
+        for k, _ in self.trace_locks:
+            if k not in LOCKS or k == "none":
+                raise InputError("trace_locks", f"unknown lock structure {k!r}")
+        self.trace_steps = []
+        self.trf = np.zeros((4096 if self.trace_locks else 0, 2))
+        self.tri = np.zeros((self.trf.shape[0], 3), np.int64)
         hill = physics.hill
         if hill is not None and 1.5 * hill.omega * dt >= 0.25:
             raise InputError("dt", f"{dt} s is too long for the shearing sheet: "
@@ -147,6 +159,9 @@ class Engine:
         self.tlast_in = None if self.guarded else state.t_last.copy() if copy else state.t_last
         self.ids = np.arange(n, dtype=np.int32)
         self.perm = np.arange(n, dtype=np.int32)
+        vcap = max(4096, n // 16)  # violators moved per node by a re-sort
+        self.vslots = np.zeros(vcap, np.int64)
+        self.vids = np.zeros(vcap, np.int32)
         self.scratch = np.zeros(n, np.uint8)
         self.anc = np.zeros((n, 3))
         self.reach = np.zeros(n)
@@ -315,7 +330,7 @@ class Engine:
             self.since_build = 0
         else:
             nnodes = self.nnodes
-            rebuild(self.pos, self.perm, self.ntop, nnodes)
+            rebuild(self.pos, self.perm, self.ntop, nnodes, self.vslots, self.vids)
             self.since_build += 1
         for arr in (self.vel, self.pos):
             permute_mat3(arr, self.perm, self.scratch)
@@ -358,7 +373,7 @@ class Engine:
             K.init_events(parts, nbrs, evq, cfg, st)
             try:
                 if sequential:
-                    status = self._events_sequential(st, img_pos, img_vel, full)
+                    status = self._events_sequential(st, img_pos, img_vel, full, half)
                 else:
                     status = self._events_parallel(st, img_pos, img_vel, half, full)
             except BaseException:
@@ -400,25 +415,63 @@ class Engine:
                     f"is left at the last completed step.")
             raise SimulationError(f"engine status {STATUS_NAMES.get(status, status)}")
 
-    def _events_sequential(self, st, img_pos, img_vel, full):
+    def _events_sequential(self, st, img_pos, img_vel, full, half):
         parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
+        if self.trace_locks:
+            locks = {}
+            for kind, scale in self.trace_locks:
+                regions = self.build_locks(img_pos, half, kind, scale)
+                by_id = np.empty(self.n, np.int32)
+                by_id[self.ids] = regions.lock_of
+                locks[(kind, scale)] = (by_id, regions.loff, regions.ladj)
+            self.ctr[K.TCOUNT] = 0
         while True:
             status = K.run_events(parts, step, tree, nbrs, evq, jour, cfg, st, self.no_locks,
-                                  self.chunk_events)
+                                  (self.trf, self.tri), self.chunk_events)
             if status == K.CHUNK:
                 continue
-            if status in (K.NEED_JOURNAL, K.NEED_LOG):
-                self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
+            if status in (K.NEED_JOURNAL, K.NEED_LOG, K.NEED_TRACE):
+                if status == K.NEED_JOURNAL:
+                    self._grow_journal()
+                elif status == K.NEED_LOG:
+                    self._grow_log()
+                else:
+                    self._grow_trace()
                 parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
                 continue
+            if status == K.OK and self.trace_locks:
+                k = int(self.ctr[K.TCOUNT])
+                ev = np.zeros(k, dtype=[("t", np.float64), ("cycles", np.float64),
+                                        ("i", np.int64), ("j", np.int64), ("kind", np.int64)])
+                ev["t"], ev["cycles"] = self.trf[:k, 0], self.trf[:k, 1]
+                ev["i"], ev["j"], ev["kind"] = self.tri[:k, 0], self.tri[:k, 1], self.tri[:k, 2]
+                self.trace_steps.append({"events": ev, "locks": locks})
             return status
 
-    def build_locks(self, img_pos, half):
-        """The lock regions of the current step (after ``_setup``)."""
-        if self.lock == "graph":
+    def _grow_trace(self):
+        used = int(self.ctr[K.TCOUNT])
+        trf = np.zeros((2 * self.trf.shape[0], 2))
+        tri = np.zeros((2 * self.tri.shape[0], 3), np.int64)
+        trf[:used], tri[:used] = self.trf[:used], self.tri[:used]
+        self.trf, self.tri = trf, tri
+
+    def trace(self):
+        """The recorded trace: a list per step of {'events': structured array
+        (t, cycles, i, j, kind) in processing order (ids; j = -1 for walls),
+        'locks': {(lock, scale): (region of each particle id, loff, ladj)}},
+        and the cycle counter's frequency."""
+        return {"steps": self.trace_steps, "cycles_per_second": cycles_per_second(),
+                "n": self.n, "dt": self.dt}
+
+    def build_locks(self, img_pos, half, lock=None, scale=None):
+        """The lock regions of the current step (after ``_setup``); by default of the
+        engine's own lock structure and SCALE."""
+        lock = lock or self.lock
+        scale = scale or self.scale
+        if lock == "graph":
             return L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
-                                self.scale, self.n)
-        dims = 3 if self.lock == "grid3d" else 2
+                                scale, self.n)
+        dims = 3 if lock == "grid3d" else 2
         return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
                             self.time, dims)
 

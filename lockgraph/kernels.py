@@ -42,8 +42,8 @@ import numpy as np
 from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, build_queue
-from .atomics import fetch_add, fetch_max, float_bits
-from .neighbors import JCOUNT, LCOUNT, XCOUNT, add_pair
+from .atomics import cycles, fetch_add, fetch_max, float_bits
+from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
 from .predict import INF, cylinder_time, floor_time, pair_time
 from .restitution import coefficient
 from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2, raise_reach
@@ -61,7 +61,10 @@ NIPAR = 4
  S_ECYC) = range(19)
 NSTAT = 24
 # status codes
-OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL = range(9)
+(OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL,
+ NEED_TRACE) = range(10)
+# trace kinds
+T_PAIR, T_WALL, T_STALE = 0, 1, 2
 CTR_BAD = 2  # ctr slot: the slot that caused a COLLAPSE / SIGMA_TOO_LARGE
 
 WALL_KEY_FLOOR = 1 << 62
@@ -480,13 +483,17 @@ def process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
 
 
 @kernel
-def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, max_events):
+def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, trace, max_events):
     """Process events in (time, id) order until the step end or a status.
 
     Returns OK when no event is left before the step end, CHUNK after
-    ``max_events`` events, NEED_JOURNAL / NEED_LOG (nothing changed; grow the
-    buffer and call again) or an error status (POOL_OVERFLOW, COLLAPSE,
-    SIGMA_TOO_LARGE: the step must be rolled back).
+    ``max_events`` events, NEED_JOURNAL / NEED_LOG / NEED_TRACE (nothing
+    changed; grow the buffer and call again) or an error status
+    (POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE: the step must be rolled back).
+
+    ``trace = (trf, tri)`` (empty: off) records every event popped, for the
+    scheduling replay: ``trf[k] = (t, cycles spent)``, ``tri[k] = (id of i,
+    id of the partner or -1, kind)`` with kind T_PAIR, T_WALL or T_STALE.
     """
     ids = parts[7]
     ctr = nbrs[5]
@@ -506,9 +513,24 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, max_events):
             return NEED_LOG
         if ctr[JCOUNT] + 2 > jslot.shape[0]:
             return NEED_JOURNAL
+        trf, tri = trace
+        tracing = trf.shape[0] > 0
+        if tracing:
+            if ctr[TCOUNT] >= trf.shape[0]:
+                return NEED_TRACE
+            p = evp[i]
+            c0 = cycles()
         status, j = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
         if status != OK:
             return status
+        if tracing:
+            k = ctr[TCOUNT]
+            trf[k, 0] = t
+            trf[k, 1] = cycles() - c0
+            tri[k, 0] = ids[i]
+            tri[k, 1] = ids[p >> 5] if p >= 0 else -1
+            tri[k, 2] = T_WALL if p < 0 else (T_PAIR if j >= 0 else T_STALE)
+            ctr[TCOUNT] = k + 1
         update_queue(tour_t, tour_s, evt, ids, hidden, 0, evt.shape[0], i)
         if j >= 0:
             update_queue(tour_t, tour_s, evt, ids, hidden, 0, evt.shape[0], j)

@@ -19,7 +19,8 @@ XCOUNT = 0  # ctr slot: extras used
 JCOUNT = 1  # ctr slot: journal entries used
 # ctr slot 2 is the engine's CTR_BAD
 LCOUNT = 3  # ctr slot: event-log entries used
-NCTR = 4
+TCOUNT = 4  # ctr slot: trace entries used
+NCTR = 8
 
 
 @kernel

@@ -164,15 +164,21 @@ def build(pos, leaf_size, perm, ntop, stack):
 
 
 @kernel
-def rebuild(pos, perm, ntop, nnodes):
+def rebuild(pos, perm, ntop, nnodes, slots, ids):
     """Re-sort particles into an existing topology (same ranges and split axes).
 
     The node ranges depend only on N and the leaf size, so last step's tree
     fits again once every node's two halves are re-split along its axis.
-    Storage is still in last step's order, so most nodes are split already: a
-    scan checks that and a selection runs only where a particle crossed.
-    Parents come before children in node order.
+    Storage is still in last step's order, so at most nodes no particle has
+    crossed; where some have, only those *violators* move: the ones in the left
+    half beyond the right half's minimum and those in the right half below the
+    left half's maximum are selected among themselves and written back into
+    their own slots (the rest of the order, and so cache locality, is kept).
+    ``slots`` and ``ids`` (int64) are work buffers; where the violators do not
+    fit, the node is re-split by a full selection.  Parents come before
+    children in node order.
     """
+    cap = slots.shape[0]
     for nd in range(nnodes):
         left = ntop[nd, LEFT]
         if left < 0:
@@ -191,8 +197,28 @@ def rebuild(pos, perm, ntop, nnodes):
             v = pos[perm[k], axis]
             if v < mn:
                 mn = v
-        if mx > mn:
+        if mx <= mn:
+            continue
+        nv = 0
+        for k in range(s, m):
+            if pos[perm[k], axis] > mn:
+                if nv < cap:
+                    slots[nv] = k
+                nv += 1
+        nl = nv
+        for k in range(m, e):
+            if pos[perm[k], axis] < mx:
+                if nv < cap:
+                    slots[nv] = k
+                nv += 1
+        if nv > cap:
             _select(perm, pos, axis, s, e - 1, m)
+            continue
+        for q in range(nv):
+            ids[q] = perm[slots[q]]
+        _select(ids, pos, axis, 0, nv - 1, nl)  # the nl smallest violators first
+        for q in range(nv):
+            perm[slots[q]] = ids[q]
 
 
 @kernel
