@@ -31,14 +31,28 @@ from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, XCOUNT, build_csr
 from .state import State
-from .tree import (NTOP, build, count_nodes, identity, node_bounds, pair_search, permute_mat3,
-                   permute_vec, rebuild)
+from .tree import (NTOP, bound_node, count_nodes, identity, node_bounds, pair_search,
+                   permute_mat3, permute_vec, resort, search_tasks, skeleton, subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 POLICIES = ("exact", "paper")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
                 K.STALL: "stall"}
+
+
+def _finish(pos, vel, tl, dt, g, code, wp, omega):
+    """Step end for a slice of particles: real coordinates, wrap, second half kick."""
+    K.leave_frame(pos, vel, tl, dt, g)
+    wrap(pos, vel, code, wp)
+    if omega:
+        kick_hill(pos, vel, omega, 0.5 * dt)
+
+
+def _permute_some(arrays, perm, scratch):
+    """Apply the storage permutation to a few arrays (one thread's share)."""
+    for fn, arr in arrays:
+        fn(arr, perm, scratch)
 
 
 class Engine:
@@ -160,9 +174,9 @@ class Engine:
         self.ids = np.arange(n, dtype=np.int32)
         self.perm = np.arange(n, dtype=np.int32)
         vcap = max(4096, n // 16)  # violators moved per node by a re-sort
-        self.vslots = np.zeros(vcap, np.int64)
-        self.vids = np.zeros(vcap, np.int32)
-        self.scratch = np.zeros(n, np.uint8)
+        parts = max(self.threads, 2 ** (math.ceil(math.log2(self.threads))))
+        self.vslots = np.zeros((parts, vcap), np.int64)
+        self.vids = np.zeros((parts, vcap), np.int32)
         self.anc = np.zeros((n, 3))
         self.reach = np.zeros(n)
         self.top = np.zeros(2)
@@ -170,17 +184,28 @@ class Engine:
         self.speed_sample = np.zeros(min(n, 1024) if n else 1)
         self.cis = np.zeros(n, np.int32)
         self.work = np.zeros(256, np.int64)
-        self.stack2 = np.zeros((4096, 2), np.int64)
+        self.stack2 = np.zeros((self.threads, 4096, 3), np.int64)
+        self.search_work2 = np.zeros((self.threads, 2))
         self.nnodes_cap = count_nodes(n, self.leaf_size)
         self.ntop = np.zeros((self.nnodes_cap, NTOP), np.int32)
+        self.nnodes = skeleton(n, self.leaf_size, self.ntop, np.zeros(256, np.int64))
         self.since_build = None  # steps since the tree was last built from scratch
+        t = self.threads
+        # the subtrees the threads re-sort and bound (2^depth of them), and the nodes above
+        self.depth_split = max(0, math.ceil(math.log2(t))) if t > 1 else 0
+        self.subroots, self.top_nodes = self._split_nodes(self.depth_split)
+        parts = max(t, len(self.subroots))
+        self.stacks = np.zeros((parts, 512), np.int64)
+        self.order = np.zeros((parts, self.nnodes_cap), np.int64)
+        self.scratches = np.zeros((t, n), np.uint8)
         self.nbox = np.zeros((self.nnodes_cap, 6))
         self.nreach = np.zeros(self.nnodes_cap)
         self.noff = np.zeros(n + 1, np.int64)
-        self.pair_cap = max(1024, 4 * n)
-        self.out_a = np.zeros(self.pair_cap, np.int32)
-        self.out_e = np.zeros(self.pair_cap, np.int32)
-        self.nent = np.zeros(2 * self.pair_cap, np.int32)
+        self.pair_cap = max(1024, 4 * n // self.threads)  # per search part
+        self.out_a = np.zeros((self.threads, self.pair_cap), np.int32)
+        self.out_e = np.zeros((self.threads, self.pair_cap), np.int32)
+        self.npairs_part = np.zeros(self.threads, np.int64)
+        self.nent = np.zeros(2 * self.pair_cap * self.threads, np.int32)
         self.xhead = np.full(n, -1, np.int32)
         self.xent = np.zeros(max(1024, n // 4), np.int32)
         self.xnext = np.zeros(self.xent.shape[0], np.int32)
@@ -238,6 +263,36 @@ class Engine:
         ipar[K.I_CAP] = self.collapse_limit
         ipar[K.I_PAPER] = 1 if self.policy == "paper" else 0
 
+    def _split_nodes(self, depth):
+        """The nodes at ``depth`` (or leaves above it), left to right, and the nodes above."""
+        subroots, top = [], []
+        stack = [(0, 0)]
+        while stack:
+            nd, dep = stack.pop()
+            left = int(self.ntop[nd, 0])
+            if dep == depth or left < 0:
+                subroots.append(nd)
+                continue
+            top.append(nd)
+            stack.append((int(self.ntop[nd, 1]), dep + 1))
+            stack.append((left, dep + 1))
+        subroots.sort(key=lambda nd: self.ntop[nd, 2])
+        return subroots, top
+
+    def _pmap(self, fn, arglist):
+        """Run fn(*args) for each args, on the worker threads when there are some."""
+        if self.workers is None or len(arglist) <= 1:
+            return [fn(*a) for a in arglist]
+        futures = [self.workers.pool.submit(fn, *a) for a in arglist]
+        out = []
+        for f in futures:
+            out.append(f.result())
+        return out
+
+    def _slices(self):
+        t = self.threads
+        return [slice(self.n * k // t, self.n * (k + 1) // t) for k in range(t)]
+
     def state(self):
         """The current state as a State ordered by particle id (a copy)."""
         order = np.empty(self.n, np.int64)
@@ -271,23 +326,25 @@ class Engine:
         ph = self.physics
         hill = ph.hill
         if hill is not None:
-            kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
+            self._pmap(kick_hill, [(self.pos[q], self.vel[q], hill.omega, 0.5 * self.dt)
+                                   for q in self._slices()])
         try:
             st = self._drift_phase()
         except BaseException:
             if hill is not None:
                 kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
             raise
-        K.drift_all(self.pos, self.vel, self.tl, self.dt)
+        sl = self._slices()
+        self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt) for q in sl])
         if check_end:
             ov = K.max_overlap(self.pos, self.rad, self.noff, self.nent, self.xhead, self.xent,
                                self.xnext, self._img_pos, self._img_vel, self.dt)
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
-        K.leave_frame(self.pos, self.vel, self.tl, self.dt, ph.g)
         self.time += self.dt
-        wrap(self.pos, self.vel, ph.domain.code, ph.domain.wrap_params(self.time))
-        if hill is not None:
-            kick_hill(self.pos, self.vel, hill.omega, 0.5 * self.dt)
+        wp = ph.domain.wrap_params(self.time)
+        self._pmap(_finish, [(self.pos[q], self.vel[q], self.tl[q], self.dt, ph.g,
+                              ph.domain.code, wp, hill.omega if hill is not None else 0.0)
+                             for q in sl])
         self._accumulate(st)
         self.last_events = float(st[K.S_POPS])
         self.steps_done += 1
@@ -308,6 +365,7 @@ class Engine:
         touch or overlap now (for checking an input state).
         """
         n = self.n
+        sl = self._slices()
         if touching_only:
             self.reach[:] = self.rad
         else:
@@ -315,48 +373,69 @@ class Engine:
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra
-            K.compute_reach(self.pos, self.vel, self.rad, self.reach, self.par, extra, self.top)
+            tops = np.zeros((self.threads, 2))
+            self._pmap(K.compute_reach, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q],
+                                          self.par, extra, tops[k]) for k, q in enumerate(sl)])
+            top = np.sort(tops.ravel())[::-1]
+            self.top[:] = top[:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
                 raise StepTooLargeError(
                     f"dt={self.dt}: two particles' reaches ({self.top[0]:.4g} and "
                     f"{self.top[1]:.4g} m) could span half the periodic box "
                     f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
             self.par[K.P_RMAX] = self.top[0]
-        if self.since_build is None or self.since_build >= self.rebuild_every:
-            nnodes = build(self.pos, self.leaf_size, self.perm, self.ntop, self.work)
-            if nnodes < 0:
-                raise SimulationError("kD-tree deeper than its work stack")
-            self.nnodes = nnodes
-            self.since_build = 0
-        else:
-            nnodes = self.nnodes
-            rebuild(self.pos, self.perm, self.ntop, nnodes, self.vslots, self.vids)
-            self.since_build += 1
-        for arr in (self.vel, self.pos):
-            permute_mat3(arr, self.perm, self.scratch)
-        for arr in (self.rad, self.mass, self.ncoll, self.ids, self.reach):
-            permute_vec(arr, self.perm, self.scratch)
+        # the tree: a fresh one every rebuild_every steps, else last step's re-sorted;
+        # the nodes above the threads' subtrees first, then the subtrees in parallel
+        fresh = self.since_build is None or self.since_build >= self.rebuild_every
+        self.since_build = 0 if fresh else self.since_build + 1
+        if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
+                  self.vids[0], self.stacks[0]) < 0:
+            raise SimulationError("kD-tree deeper than its work stack")
+        res = self._pmap(resort, [(self.pos, self.perm, self.ntop, nd, -1, fresh,
+                                   self.vslots[k], self.vids[k], self.stacks[k])
+                                  for k, nd in enumerate(self.subroots)])
+        if min(res) < 0:
+            raise SimulationError("kD-tree deeper than its work stack")
+        arrays = [(permute_mat3, self.pos), (permute_mat3, self.vel), (permute_vec, self.rad),
+                  (permute_vec, self.mass), (permute_vec, self.ncoll), (permute_vec, self.ids),
+                  (permute_vec, self.reach)]
         if self.guarded:
-            permute_vec(self.tlast, self.perm, self.scratch)
+            arrays.append((permute_vec, self.tlast))
+        t = self.threads
+        self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
+                                   for k in range(min(t, len(arrays)))])
         identity(self.perm)
-        self.anc[:] = self.pos
-        node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
+        self._pmap(K.copy_rows, [(self.anc[q], self.pos[q]) for q in sl])
+        nnodes = self.nnodes
+        if self.threads == 1:
+            node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
+        else:
+            self._pmap(subtree_bounds, [(self.anc, self.reach, self.ntop, nd, self.nbox,
+                                         self.nreach, self.order[k])
+                                        for k, nd in enumerate(self.subroots)])
+            for nd in reversed(self.top_nodes):  # pre-order reversed: children first
+                bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)
+        parts = search_tasks(self.ntop, half, self.threads)
         while True:
-            npairs = pair_search(self.anc, self.reach, self.ntop, self.nbox, self.nreach, half,
-                                 img_pos, self.out_a, self.out_e, self.stack2, self.search_work)
-            if npairs < 0:
+            res = self._pmap(pair_search, [(self.anc, self.reach, self.ntop, self.nbox,
+                                            self.nreach, parts[k], img_pos, self.out_a[k],
+                                            self.out_e[k], self.stack2[k], self.search_work2[k])
+                                           for k in range(self.threads)])
+            if min(res) < 0:
                 raise SimulationError("pair search deeper than its work stack")
-            if npairs <= self.pair_cap:
+            self.npairs_part[:] = res
+            if max(res) <= self.pair_cap:
                 break
-            self.pair_cap = int(npairs * 1.25) + 1024
-            self.out_a = np.zeros(self.pair_cap, np.int32)
-            self.out_e = np.zeros(self.pair_cap, np.int32)
-            self.nent = np.zeros(2 * self.pair_cap, np.int32)
-        self.npairs = npairs
-        self.search_visits += self.search_work[0]
-        self.search_tests += self.search_work[1]
-        build_csr(n, npairs, self.out_a, self.out_e, self.noff, self.nent)
-        K.reset_step(self.tl, self.cis, self.xhead, self.ctr, self.hidden)
+            self.pair_cap = int(max(res) * 1.25) + 1024
+            self.out_a = np.zeros((self.threads, self.pair_cap), np.int32)
+            self.out_e = np.zeros((self.threads, self.pair_cap), np.int32)
+            self.nent = np.zeros(2 * self.pair_cap * self.threads, np.int32)
+        self.npairs = int(self.npairs_part.sum())
+        self.search_visits += self.search_work2[:, 0].sum()
+        self.search_tests += self.search_work2[:, 1].sum()
+        build_csr(n, self.npairs_part, self.out_a, self.out_e, self.noff, self.nent)
+        self._pmap(K.reset_step, [(self.tl[q], self.cis[q], self.xhead[q], self.ctr,
+                                   self.hidden[q]) for q in sl])
 
     def _drift_phase(self):
         ph = self.physics
@@ -370,7 +449,13 @@ class Engine:
             self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
-            K.init_events(parts, nbrs, evq, cfg, st)
+            if sequential:
+                K.init_events(parts, nbrs, evq, cfg, st)
+            else:
+                rows = np.zeros((self.threads, K.NSTAT))
+                self._pmap(K.init_range, [(parts, nbrs, evq, cfg, rows[k], q.start, q.stop)
+                                          for k, q in enumerate(self._slices())])
+                st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
             try:
                 if sequential:
                     status = self._events_sequential(st, img_pos, img_vel, full, half)
@@ -470,7 +555,7 @@ class Engine:
         scale = scale or self.scale
         if lock == "graph":
             return L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
-                                scale, self.n)
+                                scale, self.n, self._pmap, self.threads)
         dims = 3 if lock == "grid3d" else 2
         return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
                             self.time, dims)
@@ -514,11 +599,11 @@ class Engine:
         q = tournament_size(int((dhi - dlo).max()))
         dtour_t = np.full((self.threads, 2 * q), np.inf)
         dtour_s = np.full((self.threads, 2 * q), -1, np.int32)
-        for d in range(self.threads):
-            build_queue(dtour_t[d], dtour_s[d], self.evt, self.ids, self.hidden, dlo[d], dhi[d])
+        self._pmap(build_queue, [(dtour_t[d], dtour_s[d], self.evt, self.ids, self.hidden,
+                                  dlo[d], dhi[d]) for d in range(self.threads)])
         doms = (dom, bd, dlo, dhi, dtour_t, dtour_s)
-        interior = np.isin(regions.lock_of, np.flatnonzero(bd >= INTERIOR))
-        self.lock_stats["interior_fraction"] = float(interior.mean()) if self.n else 0.0
+        counts = np.bincount(regions.lock_of, minlength=r)
+        self.lock_stats["interior_fraction"] = float(counts[bd >= INTERIOR].sum()) / max(self.n, 1)
         # how far an interior event may run ahead of the other domains: a few of
         # one domain's typical gaps between events (from the last step)
         per_domain = max(self.last_events / self.threads, 1.0)

@@ -483,6 +483,41 @@ def process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
 
 
 @kernel
+def init_range(parts, nbrs, evq, cfg, st, lo, hi):
+    """Threaded variant of ``init_events`` for slots lo..hi-1: each particle's
+    first event (all its candidates, as ``predict``) and the largest overlap
+    among its pairs with higher slots.  The queue is built separately."""
+    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
+    noff, nent, xhead, xent, xnext, ctr = nbrs
+    par, ipar, img_pos, img_vel, img_all, parb = cfg
+    for i in range(lo, hi):
+        predict(i, 0.0, parts, nbrs, evq, cfg)
+        for k in range(noff[i], noff[i + 1]):
+            e = nent[k]
+            j = e >> 5
+            if j < i:
+                continue
+            img = e & 31
+            contact = rad[i] + rad[j]
+            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
+            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
+            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < contact * contact:
+                ov = (contact - math.sqrt(d2)) / contact
+                if ov > st[S_MAXOV]:
+                    st[S_MAXOV] = ov
+
+
+@kernel
+def copy_rows(dst, src):
+    for i in range(src.shape[0]):
+        dst[i, 0] = src[i, 0]
+        dst[i, 1] = src[i, 1]
+        dst[i, 2] = src[i, 2]
+
+
+@kernel
 def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, trace, max_events):
     """Process events in (time, id) order until the step end or a status.
 
@@ -583,6 +618,7 @@ def compute_reach(pos, vel, rad, reach, par, extra, top):
 
 @kernel
 def reset_step(tl, cis, xhead, ctr, hidden):
+    """Clear the per-step arrays (callable on slices: ctr is reset by every call)."""
     tl[:] = 0.0
     cis[:] = 0
     hidden[:] = 0

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from ._jit import kernel
-from .tree import AXIS, END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2
+from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2, search_tasks
 
 KINDS = ("graph", "grid", "grid3d")
 
@@ -73,19 +73,20 @@ def _fill_lock_of(ntop, lockid, nnodes, lock_of, lnode):
 
 
 @kernel
-def _lock_edges(ntop, nbox, nreach, lockid, half_images, img_pos, out_u, out_v, stack):
-    """Two-argument recursion over lock nodes.  Returns the number of edges found
-    (entries beyond len(out_u) are counted, not stored), or -1 for a short stack."""
+def _lock_edges(ntop, nbox, nreach, lockid, tasks, img_pos, out_u, out_v, stack):
+    """Two-argument recursion over lock nodes from the task pairs (see
+    ``tree.search_tasks``).  Returns the number of edges found (entries beyond
+    len(out_u) are counted, not stored), or -1 for a short stack."""
     cap = out_u.shape[0]
     count = 0
-    for q in range(half_images.shape[0]):
-        img = half_images[q]
+    for q in range(tasks.shape[0]):
+        img = tasks[q, 2]
         ox = img_pos[img, 0]
         oy = img_pos[img, 1]
         oz = img_pos[img, 2]
         selfimg = img == SELF_IMAGE
-        stack[0, 0] = 0
-        stack[0, 1] = 0
+        stack[0, 0] = tasks[q, 0]
+        stack[0, 1] = tasks[q, 1]
         sp = 1
         while sp > 0:
             sp -= 1
@@ -134,20 +135,57 @@ def _lock_edges(ntop, nbox, nreach, lockid, half_images, img_pos, out_u, out_v, 
     return count
 
 
+@kernel
+def _edges_csr(nreg, u, v, m, loff, ladj, tmp):
+    """Symmetric CSR adjacency, duplicates removed, each list sorted.
+
+    ``u[:m]``, ``v[:m]``: edges (either order, duplicates allowed); ``loff``
+    (nreg+1,) and ``ladj`` (2m,) receive the result, ``tmp`` (2m,) is work space.
+    Returns the number of adjacency entries.
+    """
+    for r in range(nreg + 1):
+        loff[r] = 0
+    for k in range(m):
+        loff[u[k] + 1] += 1
+        loff[v[k] + 1] += 1
+    for r in range(nreg):
+        loff[r + 1] += loff[r]
+    for k in range(m):  # fill, with loff[r] as r's cursor
+        tmp[loff[u[k]]] = v[k]
+        loff[u[k]] += 1
+        tmp[loff[v[k]]] = u[k]
+        loff[v[k]] += 1
+    for r in range(nreg, 0, -1):
+        loff[r] = loff[r - 1]
+    loff[0] = 0
+    out = 0
+    for r in range(nreg):
+        s = loff[r]
+        e = loff[r + 1]
+        for a in range(s + 1, e):  # insertion sort: lists are short
+            x = tmp[a]
+            b = a - 1
+            while b >= s and tmp[b] > x:
+                tmp[b + 1] = tmp[b]
+                b -= 1
+            tmp[b + 1] = x
+        loff[r] = out
+        for a in range(s, e):
+            if a == s or tmp[a] != tmp[a - 1]:
+                ladj[out] = tmp[a]
+                out += 1
+    loff[nreg] = out
+    return out
+
+
 def _csr(nregions, u, v):
-    """Symmetric CSR adjacency from an edge list (duplicates removed)."""
-    if len(u):
-        key = np.unique(u.astype(np.int64) * nregions + v.astype(np.int64))
-        u = (key // nregions).astype(np.int32)
-        v = (key % nregions).astype(np.int32)
-    a = np.concatenate([u, v])
-    b = np.concatenate([v, u])
-    order = np.lexsort((b, a))
-    a, b = a[order], b[order]
+    """Symmetric CSR adjacency from an edge list (duplicates removed, lists sorted)."""
+    m = len(u)
     loff = np.zeros(nregions + 1, np.int64)
-    np.add.at(loff, a.astype(np.int64) + 1, 1)
-    np.cumsum(loff, out=loff)
-    return loff, b.astype(np.int32)
+    ladj = np.zeros(2 * m, np.int32)
+    k = _edges_csr(nregions, u.astype(np.int32), v.astype(np.int32), m, loff, ladj,
+                   np.zeros(2 * m, np.int32))
+    return loff, ladj[:k].copy()
 
 
 class LockRegions:
@@ -185,8 +223,12 @@ class LockRegions:
         return b in self.ladj[self.loff[a]:self.loff[a + 1]]
 
 
-def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n):
-    """The lock graph of a built tree (node bounds and reaches filled in)."""
+def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n, pmap=None,
+               parts=1):
+    """The lock graph of a built tree (node bounds and reaches filled in).
+
+    ``pmap(fn, arglists)``, if given, runs the edge search in ``parts`` pieces
+    on worker threads."""
     lockid = np.full(nnodes, -1, np.int32)
     stack = np.zeros(256, np.int64)
     nl = _mark_lock_nodes(ntop, nbox, nreach, float(scale), lockid, stack)
@@ -195,18 +237,22 @@ def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n):
     lock_of = np.zeros(n, np.int32)
     lnode = np.zeros(nl, np.int32)
     _fill_lock_of(ntop, lockid, nnodes, lock_of, lnode)
-    cap = 8 * nl + 64
-    stack2 = np.zeros((4096, 2), np.int64)
+    pmap = pmap or (lambda fn, args: [fn(*a) for a in args])
+    tasks = search_tasks(ntop, half_images, parts, stop=lockid)
+    cap = 8 * nl // parts + 64
     while True:
-        u = np.zeros(cap, np.int32)
-        v = np.zeros(cap, np.int32)
-        m = _lock_edges(ntop, nbox, nreach, lockid, half_images, img_pos, u, v, stack2)
-        if m < 0:
+        u = np.zeros((parts, cap), np.int32)
+        v = np.zeros((parts, cap), np.int32)
+        ms = pmap(_lock_edges, [(ntop, nbox, nreach, lockid, tasks[k], img_pos, u[k], v[k],
+                                 np.zeros((4096, 2), np.int64)) for k in range(parts)])
+        if min(ms) < 0:
             raise RuntimeError("lock-graph recursion deeper than its stack")
-        if m <= cap:
+        if max(ms) <= cap:
             break
-        cap = m + 64
-    loff, ladj = _csr(nl, u[:m], v[:m])
+        cap = max(ms) + 64
+    u = np.concatenate([u[k, :ms[k]] for k in range(parts)])
+    v = np.concatenate([v[k, :ms[k]] for k in range(parts)])
+    loff, ladj = _csr(nl, u, v)
     return LockRegions("graph", lock_of, loff, ladj, nbox[lnode].copy(),
                        {"scale": float(scale), "lock_nodes": lnode})
 

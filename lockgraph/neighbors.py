@@ -25,24 +25,27 @@ NCTR = 8
 
 @kernel
 def build_csr(n, npairs, out_a, out_e, noff, nent):
-    """Symmetric CSR lists from the pair search's output."""
+    """Symmetric CSR lists from the pair search's output, one row per search
+    part: ``out_a[p, :npairs[p]]``, ``out_e[p, :npairs[p]]``."""
     for i in range(n + 1):
         noff[i] = 0
-    for k in range(npairs):
-        noff[out_a[k] + 1] += 1
-        noff[(out_e[k] >> 5) + 1] += 1
+    for p in range(npairs.shape[0]):
+        for k in range(npairs[p]):
+            noff[out_a[p, k] + 1] += 1
+            noff[(out_e[p, k] >> 5) + 1] += 1
     for i in range(n):
         noff[i + 1] += noff[i]
     # fill using noff[i] as i's cursor; afterwards noff[i] is i's end: shift back
-    for k in range(npairs):
-        a = out_a[k]
-        e = out_e[k]
-        b = e >> 5
-        img = e & 31
-        nent[noff[a]] = e
-        noff[a] += 1
-        nent[noff[b]] = (a << 5) | (26 - img)
-        noff[b] += 1
+    for p in range(npairs.shape[0]):
+        for k in range(npairs[p]):
+            a = out_a[p, k]
+            e = out_e[p, k]
+            b = e >> 5
+            img = e & 31
+            nent[noff[a]] = e
+            noff[a] += 1
+            nent[noff[b]] = (a << 5) | (26 - img)
+            noff[b] += 1
     for i in range(n, 0, -1):
         noff[i] = noff[i - 1]
     noff[0] = 0

@@ -4,7 +4,7 @@ import numpy as np
 from .errors import InputError
 from .kernels import overlap_report
 from .neighbors import build_csr
-from .tree import build, count_nodes, node_bounds, pair_search
+from .tree import build, count_nodes, node_bounds, pair_search, search_tasks
 
 # Relative overlap (contact - distance)/contact accepted in an input state.  The
 # engine's own states carry overlaps of order 1e-15 (rounding at contact), so
@@ -29,18 +29,19 @@ def max_overlap(state, domain):
     node_bounds(anc, rad, ntop, nn, nbox, nreach)
     img_pos, img_vel, half, full = domain.images(state.time)
     cap = 4 * n + 1024
-    stack = np.zeros((4096, 2), np.int64)
+    stack = np.zeros((4096, 3), np.int64)
+    tasks = search_tasks(ntop, half, 1)[0]
     while True:
-        out_a = np.zeros(cap, np.int32)
-        out_e = np.zeros(cap, np.int32)
-        m = pair_search(anc, rad, ntop, nbox, nreach, half, img_pos, out_a, out_e, stack,
+        out_a = np.zeros((1, cap), np.int32)
+        out_e = np.zeros((1, cap), np.int32)
+        m = pair_search(anc, rad, ntop, nbox, nreach, tasks, img_pos, out_a[0], out_e[0], stack,
                         np.zeros(2))
         if m <= cap:
             break
         cap = m + 1024
     noff = np.zeros(n + 1, np.int64)
     nent = np.zeros(2 * m, np.int32)
-    build_csr(n, m, out_a, out_e, noff, nent)
+    build_csr(n, np.array([m], np.int64), out_a, out_e, noff, nent)
     out = np.zeros(3, np.int64)
     worst = overlap_report(anc, rad, noff, nent, img_pos, OVERLAP_TOLERANCE, out)
     a = int(perm[out[0]]) if out[0] >= 0 else -1

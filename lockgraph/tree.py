@@ -83,26 +83,22 @@ def _select(perm, pos, axis, lo, hi, k):
 
 
 @kernel
-def build(pos, leaf_size, perm, ntop, stack):
-    """Build the tree topology over ``pos`` (N,3).
+def skeleton(n, leaf_size, ntop, stack):
+    """The tree's topology for n particles: node ranges, children and parents.
 
-    ``perm`` (N,) int32 must hold a permutation on entry (the identity, or the
-    previous step's order, which makes later reordering cheap); on exit slot
-    ``k`` of tree order holds particle ``perm[k]``.  Nodes are split at the
-    median of their longest axis.  ``stack`` is an int64 work array longer than
-    the tree's depth + 1.  Returns the number of nodes, or -1 if ``stack`` was
-    too short.
+    It depends only on n and the leaf size (every node is split at its middle
+    slot), so it is made once; ``resort`` fills in split axes and the order of
+    the particles.  Returns the number of nodes, or -1 if ``stack`` was short.
     """
-    n = pos.shape[0]
     ntop[0, LEFT] = -1
     ntop[0, RIGHT] = -1
     ntop[0, START] = 0
     ntop[0, END] = n
     ntop[0, PARENT] = -1
+    ntop[0, AXIS] = 0
     nnodes = 1
-    sp = 0
-    stack[sp] = 0
-    sp += 1
+    stack[0] = 0
+    sp = 1
     while sp > 0:
         sp -= 1
         nd = stack[sp]
@@ -110,115 +106,198 @@ def build(pos, leaf_size, perm, ntop, stack):
         e = ntop[nd, END]
         if e - s <= leaf_size:
             continue
-        lo0 = hi0 = pos[perm[s], 0]
-        lo1 = hi1 = pos[perm[s], 1]
-        lo2 = hi2 = pos[perm[s], 2]
-        for k in range(s + 1, e):
-            p = perm[k]
-            x = pos[p, 0]
-            y = pos[p, 1]
-            z = pos[p, 2]
-            if x < lo0:
-                lo0 = x
-            if x > hi0:
-                hi0 = x
-            if y < lo1:
-                lo1 = y
-            if y > hi1:
-                hi1 = y
-            if z < lo2:
-                lo2 = z
-            if z > hi2:
-                hi2 = z
-        axis = 0
-        ext = hi0 - lo0
-        if hi1 - lo1 > ext:
-            axis = 1
-            ext = hi1 - lo1
-        if hi2 - lo2 > ext:
-            axis = 2
         m = (s + e) >> 1
-        _select(perm, pos, axis, s, e - 1, m)
-        ntop[nd, AXIS] = axis
-        left = nnodes
-        right = nnodes + 1
-        nnodes += 2
-        ntop[left, LEFT] = -1
-        ntop[left, RIGHT] = -1
-        ntop[left, START] = s
-        ntop[left, END] = m
-        ntop[left, PARENT] = nd
-        ntop[right, LEFT] = -1
-        ntop[right, RIGHT] = -1
-        ntop[right, START] = m
-        ntop[right, END] = e
-        ntop[right, PARENT] = nd
-        ntop[nd, LEFT] = left
-        ntop[nd, RIGHT] = right
+        for c in range(2):
+            k = nnodes + c
+            ntop[k, LEFT] = -1
+            ntop[k, RIGHT] = -1
+            ntop[k, START] = s if c == 0 else m
+            ntop[k, END] = m if c == 0 else e
+            ntop[k, PARENT] = nd
+            ntop[k, AXIS] = 0
+        ntop[nd, LEFT] = nnodes
+        ntop[nd, RIGHT] = nnodes + 1
         if sp + 2 > stack.shape[0]:
             return -1
-        stack[sp] = right
-        stack[sp + 1] = left
+        stack[sp] = nnodes + 1
+        stack[sp + 1] = nnodes
         sp += 2
+        nnodes += 2
     return nnodes
 
 
 @kernel
-def rebuild(pos, perm, ntop, nnodes, slots, ids):
-    """Re-sort particles into an existing topology (same ranges and split axes).
+def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack):
+    """Put the particles of the subtree under ``root`` into tree order.
 
-    The node ranges depend only on N and the leaf size, so last step's tree
-    fits again once every node's two halves are re-split along its axis.
-    Storage is still in last step's order, so at most nodes no particle has
-    crossed; where some have, only those *violators* move: the ones in the left
-    half beyond the right half's minimum and those in the right half below the
-    left half's maximum are selected among themselves and written back into
-    their own slots (the rest of the order, and so cache locality, is kept).
-    ``slots`` and ``ids`` (int64) are work buffers; where the violators do not
-    fit, the node is re-split by a full selection.  Parents come before
-    children in node order.
+    Top-down over the subtree, down to ``max_depth`` levels below ``root``
+    (negative: all the way).  ``fresh``: every node gets the longest axis of
+    its particles' box and a median selection (a new tree); otherwise each
+    node keeps last step's axis and only the particles that crossed its split
+    are moved (``rebuild_node``).  Subtrees of different nodes are disjoint
+    slot ranges: threads may re-sort them at the same time.  Returns -1 if
+    ``stack`` was short.
     """
-    cap = slots.shape[0]
-    for nd in range(nnodes):
+    stack[0] = root
+    stack[1] = 0
+    sp = 2
+    while sp > 0:
+        sp -= 2
+        nd = stack[sp]
+        depth = stack[sp + 1]
         left = ntop[nd, LEFT]
-        if left < 0:
+        if left < 0 or (max_depth >= 0 and depth >= max_depth):
             continue
         s = ntop[nd, START]
         e = ntop[nd, END]
-        m = ntop[left, END]
-        axis = ntop[nd, AXIS]
-        mx = -np.inf
-        for k in range(s, m):
-            v = pos[perm[k], axis]
-            if v > mx:
-                mx = v
-        mn = np.inf
-        for k in range(m, e):
-            v = pos[perm[k], axis]
-            if v < mn:
-                mn = v
-        if mx <= mn:
-            continue
-        nv = 0
-        for k in range(s, m):
-            if pos[perm[k], axis] > mn:
-                if nv < cap:
-                    slots[nv] = k
-                nv += 1
-        nl = nv
-        for k in range(m, e):
-            if pos[perm[k], axis] < mx:
-                if nv < cap:
-                    slots[nv] = k
-                nv += 1
-        if nv > cap:
-            _select(perm, pos, axis, s, e - 1, m)
-            continue
-        for q in range(nv):
-            ids[q] = perm[slots[q]]
-        _select(ids, pos, axis, 0, nv - 1, nl)  # the nl smallest violators first
-        for q in range(nv):
-            perm[slots[q]] = ids[q]
+        if fresh:
+            lo0 = hi0 = pos[perm[s], 0]
+            lo1 = hi1 = pos[perm[s], 1]
+            lo2 = hi2 = pos[perm[s], 2]
+            for k in range(s + 1, e):
+                q = perm[k]
+                x = pos[q, 0]
+                y = pos[q, 1]
+                z = pos[q, 2]
+                lo0 = min(lo0, x)
+                hi0 = max(hi0, x)
+                lo1 = min(lo1, y)
+                hi1 = max(hi1, y)
+                lo2 = min(lo2, z)
+                hi2 = max(hi2, z)
+            axis = 0
+            ext = hi0 - lo0
+            if hi1 - lo1 > ext:
+                axis = 1
+                ext = hi1 - lo1
+            if hi2 - lo2 > ext:
+                axis = 2
+            ntop[nd, AXIS] = axis
+            _select(perm, pos, axis, s, e - 1, ntop[left, END])
+        else:
+            rebuild_node(pos, perm, ntop, nd, slots, ids)
+        if sp + 4 > stack.shape[0]:
+            return -1
+        stack[sp] = ntop[nd, RIGHT]
+        stack[sp + 1] = depth + 1
+        stack[sp + 2] = left
+        stack[sp + 3] = depth + 1
+        sp += 4
+    return 0
+
+
+def build(pos, leaf_size, perm, ntop, stack):
+    """A fresh tree over ``pos`` (N,3): ``skeleton`` then ``resort``.
+
+    ``perm`` (N,) int32 must hold a permutation on entry; on exit slot ``k`` of
+    tree order holds particle ``perm[k]``.  Returns the number of nodes, or -1
+    if ``stack`` was too short.
+    """
+    nn = skeleton(pos.shape[0], leaf_size, ntop, stack)
+    if nn < 0:
+        return -1
+    work = np.zeros(2 * stack.shape[0], np.int64)
+    if resort(pos, perm, ntop, 0, -1, True, np.zeros(1, np.int64), np.zeros(1, perm.dtype),
+              work) < 0:
+        return -1
+    return nn
+
+
+@kernel(inline=True)
+def rebuild_node(pos, perm, ntop, nd, slots, ids):
+    """Re-split node nd along its stored axis, moving only the particles that crossed.
+
+    The ones in the left half beyond the right half's minimum and those in the
+    right half below the left half's maximum are selected among themselves and
+    written back into their own slots: the rest of the order, and so cache
+    locality, is kept.  ``slots`` and ``ids`` are work buffers; where the
+    violators do not fit, the node is re-split by a full selection.
+    """
+    left = ntop[nd, LEFT]
+    s = ntop[nd, START]
+    e = ntop[nd, END]
+    m = ntop[left, END]
+    axis = ntop[nd, AXIS]
+    mx = -np.inf
+    for k in range(s, m):
+        v = pos[perm[k], axis]
+        if v > mx:
+            mx = v
+    mn = np.inf
+    for k in range(m, e):
+        v = pos[perm[k], axis]
+        if v < mn:
+            mn = v
+    if mx <= mn:
+        return
+    cap = slots.shape[0]
+    nv = 0
+    for k in range(s, m):
+        if pos[perm[k], axis] > mn:
+            if nv < cap:
+                slots[nv] = k
+            nv += 1
+    nl = nv
+    for k in range(m, e):
+        if pos[perm[k], axis] < mx:
+            if nv < cap:
+                slots[nv] = k
+            nv += 1
+    if nv > cap:
+        _select(perm, pos, axis, s, e - 1, m)
+        return
+    for q in range(nv):
+        ids[q] = perm[slots[q]]
+    _select(ids, pos, axis, 0, nv - 1, nl)  # the nl smallest violators first
+    for q in range(nv):
+        perm[slots[q]] = ids[q]
+
+
+@kernel
+def subtree_bounds(anc, reach, ntop, root, nbox, nreach, order):
+    """Box and max reach of every node of the subtree under ``root`` (children
+    before parents); ``order`` is a work buffer as long as the subtree."""
+    order[0] = root
+    n = 1
+    k = 0
+    while k < n:  # breadth-first listing: parents before children
+        nd = order[k]
+        k += 1
+        left = ntop[nd, LEFT]
+        if left >= 0:
+            order[n] = left
+            order[n + 1] = ntop[nd, RIGHT]
+            n += 2
+    for q in range(n - 1, -1, -1):
+        bound_node(anc, reach, ntop, order[q], nbox, nreach)
+
+
+@kernel
+def bound_node(anc, reach, ntop, nd, nbox, nreach):
+    left = ntop[nd, LEFT]
+    if left < 0:
+        s = ntop[nd, START]
+        e = ntop[nd, END]
+        for a in range(3):
+            nbox[nd, a] = np.inf
+            nbox[nd, 3 + a] = -np.inf
+        mr = 0.0
+        for k in range(s, e):
+            for a in range(3):
+                v = anc[k, a]
+                if v < nbox[nd, a]:
+                    nbox[nd, a] = v
+                if v > nbox[nd, 3 + a]:
+                    nbox[nd, 3 + a] = v
+            if reach[k] > mr:
+                mr = reach[k]
+        nreach[nd] = mr
+    else:
+        right = ntop[nd, RIGHT]
+        for a in range(3):
+            nbox[nd, a] = min(nbox[left, a], nbox[right, a])
+            nbox[nd, 3 + a] = max(nbox[left, 3 + a], nbox[right, 3 + a])
+        nreach[nd] = max(nreach[left], nreach[right])
 
 
 @kernel
@@ -230,30 +309,7 @@ def node_bounds(anc, reach, ntop, nnodes, nbox, nreach):
     tree order.
     """
     for nd in range(nnodes - 1, -1, -1):
-        left = ntop[nd, LEFT]
-        if left < 0:
-            s = ntop[nd, START]
-            e = ntop[nd, END]
-            for a in range(3):
-                nbox[nd, a] = np.inf
-                nbox[nd, 3 + a] = -np.inf
-            mr = 0.0
-            for k in range(s, e):
-                for a in range(3):
-                    v = anc[k, a]
-                    if v < nbox[nd, a]:
-                        nbox[nd, a] = v
-                    if v > nbox[nd, 3 + a]:
-                        nbox[nd, 3 + a] = v
-                if reach[k] > mr:
-                    mr = reach[k]
-            nreach[nd] = mr
-        else:
-            right = ntop[nd, RIGHT]
-            for a in range(3):
-                nbox[nd, a] = min(nbox[left, a], nbox[right, a])
-                nbox[nd, 3 + a] = max(nbox[left, 3 + a], nbox[right, 3 + a])
-            nreach[nd] = max(nreach[left], nreach[right])
+        bound_node(anc, reach, ntop, nd, nbox, nreach)
 
 
 @kernel(inline=True)
@@ -316,105 +372,147 @@ def pair_reach_ok(anc, reach, a, b, ox, oy, oz):
     return dx * dx + dy * dy + dz * dz <= r * r
 
 
-@kernel
-def pair_search(anc, reach, ntop, nbox, nreach, half_images, img_pos, out_a, out_e, stack,
-                work):
-    """Two-argument (dual-tree) recursion from the root: all candidate pairs.
+def search_tasks(ntop, half_images, parts=1, depth=2, stop=None):
+    """Starting points of the pair search: (node a, node b, image) triples.
 
-    For every image in ``half_images`` (the self image and one of each pair of
-    opposite periodic images) the recursion runs over (root, root).  Each
-    unordered pair of particles is reported once, as ``out_a[k] = a`` and
-    ``out_e[k] = (b << 5) | img`` (b in image img).  Returns the number of
-    pairs found; if that exceeds the buffers' length only the first
-    ``len(out_a)`` are stored and the caller retries with larger buffers.
-    ``stack`` is an (M, 2) int64 work array; -1 is returned if it was too short
-    (depth-first traversal needs about three entries per tree level).
-    ``work`` (2,) float64 receives the node pairs visited and the particle
-    pairs tested (the search's cost, independent of timing).
+    (root, root) for every image in ``half_images``; the self image's recursion
+    is unrolled ``depth`` levels so that the work can be shared out (never
+    through nodes with ``stop[node] >= 0``, e.g. lock nodes).  Returns
+    ``parts`` lists of tasks with about equal numbers of particles below them.
+    """
+    tasks = [(0, 0, int(img)) for img in half_images if img != SELF_IMAGE]
+    frontier = [(0, 0)]
+    for _ in range(depth):
+        nxt = []
+        for a, b in frontier:
+            la, ra = int(ntop[a, LEFT]), int(ntop[a, RIGHT])
+            lb, rb = int(ntop[b, LEFT]), int(ntop[b, RIGHT])
+            if stop is not None and (stop[a] >= 0 or stop[b] >= 0):
+                nxt.append((a, b))
+            elif a == b:
+                if la < 0:
+                    nxt.append((a, b))
+                else:
+                    nxt += [(la, la), (la, ra), (ra, ra)]
+            elif la < 0 or lb < 0:
+                nxt.append((a, b))
+            else:
+                nxt += [(la, lb), (la, rb), (ra, lb), (ra, rb)]
+        frontier = nxt
+    tasks = [(a, b, SELF_IMAGE) for a, b in frontier] + tasks
+    size = lambda t: (int(ntop[t[0], END] - ntop[t[0], START])
+                      + int(ntop[t[1], END] - ntop[t[1], START]))
+    groups = [[] for _ in range(parts)]
+    loads = [0] * parts
+    for t in sorted(tasks, key=size, reverse=True):  # largest first to the least loaded
+        k = loads.index(min(loads))
+        groups[k].append(t)
+        loads[k] += size(t)
+    return [np.array(g, np.int64).reshape(-1, 3) for g in groups]
+
+
+@kernel
+def pair_search(anc, reach, ntop, nbox, nreach, tasks, img_pos, out_a, out_e, stack, work):
+    """Two-argument (dual-tree) recursion: the candidate pairs below the tasks.
+
+    Each task (a, b, img) runs the recursion over nodes a and b, b in periodic
+    image img (see ``search_tasks``: from (root, root) for the self image and
+    one of each pair of opposite images, every unordered pair of particles is
+    found once).  Pairs are reported as ``out_a[k] = a`` and ``out_e[k] = (b <<
+    5) | img``.  Returns the number of pairs found; if that exceeds the
+    buffers' length only the first ``len(out_a)`` are stored and the caller
+    retries with larger buffers.  ``stack`` is an (M, 3) int64 work array; -1 is
+    returned if it was too short (about three entries per tree level).
+    ``work`` (2,) float64 receives the node pairs visited and the particle pairs
+    tested (the search's cost, independent of timing).
     """
     cap = out_a.shape[0]
     count = 0
     visits = 0
     tests = 0
-    for q in range(half_images.shape[0]):
-        img = half_images[q]
-        ox = img_pos[img, 0]
-        oy = img_pos[img, 1]
-        oz = img_pos[img, 2]
-        selfimg = img == SELF_IMAGE
-        sp = 0
-        stack[0, 0] = 0
-        stack[0, 1] = 0
-        sp = 1
-        while sp > 0:
-            sp -= 1
-            na = stack[sp, 0]
-            nb = stack[sp, 1]
-            visits += 1
-            la = ntop[na, LEFT]
-            lb = ntop[nb, LEFT]
-            if sp + 3 > stack.shape[0]:
-                return -1
-            if selfimg and na == nb:
-                if la < 0:
-                    s = ntop[na, START]
-                    e = ntop[na, END]
-                    tests += (e - s) * (e - s - 1) // 2
-                    for a in range(s, e):
-                        for b in range(a + 1, e):
-                            if pair_reach_ok(anc, reach, a, b, 0.0, 0.0, 0.0):
-                                if count < cap:
-                                    out_a[count] = a
-                                    out_e[count] = (b << 5) | img
-                                count += 1
-                else:
-                    ra = ntop[na, RIGHT]
-                    stack[sp, 0] = la
-                    stack[sp, 1] = la
-                    stack[sp + 1, 0] = la
-                    stack[sp + 1, 1] = ra
-                    stack[sp + 2, 0] = ra
-                    stack[sp + 2, 1] = ra
-                    sp += 3
-                continue
-            r = nreach[na] + nreach[nb]
-            if _box_gap2(nbox, na, nb, ox, oy, oz) > r * r:
-                continue
-            if la < 0 and lb < 0:
-                for a in range(ntop[na, START], ntop[na, END]):
-                    # skip a at once if it is out of reach of the whole leaf nb
-                    ra = reach[a] + nreach[nb]
-                    if point_gap2(nbox, nb, anc[a, 0] - ox, anc[a, 1] - oy,
-                                  anc[a, 2] - oz) > ra * ra:
-                        continue
-                    tests += ntop[nb, END] - ntop[nb, START]
-                    for b in range(ntop[nb, START], ntop[nb, END]):
-                        if a == b:
-                            continue  # a particle never meets its own image
-                        if pair_reach_ok(anc, reach, a, b, ox, oy, oz):
+    sp = 0
+    for q in range(tasks.shape[0]):
+        stack[sp, 0] = tasks[q, 0]
+        stack[sp, 1] = tasks[q, 1]
+        stack[sp, 2] = tasks[q, 2]
+        sp += 1
+    while sp > 0:
+        sp -= 1
+        na = stack[sp, 0]
+        nb = stack[sp, 1]
+        img = stack[sp, 2]
+        visits += 1
+        la = ntop[na, LEFT]
+        lb = ntop[nb, LEFT]
+        if sp + 3 > stack.shape[0]:
+            return -1
+        if img == SELF_IMAGE and na == nb:
+            if la < 0:
+                s = ntop[na, START]
+                e = ntop[na, END]
+                tests += (e - s) * (e - s - 1) // 2
+                for a in range(s, e):
+                    for b in range(a + 1, e):
+                        if pair_reach_ok(anc, reach, a, b, 0.0, 0.0, 0.0):
                             if count < cap:
                                 out_a[count] = a
                                 out_e[count] = (b << 5) | img
                             count += 1
-                continue
-            split_a = lb < 0
-            if la >= 0 and lb >= 0:
-                ea = max(nbox[na, 3] - nbox[na, 0], nbox[na, 4] - nbox[na, 1],
-                         nbox[na, 5] - nbox[na, 2])
-                eb = max(nbox[nb, 3] - nbox[nb, 0], nbox[nb, 4] - nbox[nb, 1],
-                         nbox[nb, 5] - nbox[nb, 2])
-                split_a = ea >= eb
-            if split_a:
-                stack[sp, 0] = la
-                stack[sp, 1] = nb
-                stack[sp + 1, 0] = ntop[na, RIGHT]
-                stack[sp + 1, 1] = nb
             else:
-                stack[sp, 0] = na
-                stack[sp, 1] = lb
-                stack[sp + 1, 0] = na
-                stack[sp + 1, 1] = ntop[nb, RIGHT]
-            sp += 2
+                ra = ntop[na, RIGHT]
+                for c in range(3):
+                    stack[sp + c, 2] = img
+                stack[sp, 0] = la
+                stack[sp, 1] = la
+                stack[sp + 1, 0] = la
+                stack[sp + 1, 1] = ra
+                stack[sp + 2, 0] = ra
+                stack[sp + 2, 1] = ra
+                sp += 3
+            continue
+        ox = img_pos[img, 0]
+        oy = img_pos[img, 1]
+        oz = img_pos[img, 2]
+        r = nreach[na] + nreach[nb]
+        if _box_gap2(nbox, na, nb, ox, oy, oz) > r * r:
+            continue
+        if la < 0 and lb < 0:
+            for a in range(ntop[na, START], ntop[na, END]):
+                # skip a at once if it is out of reach of the whole leaf nb
+                ra = reach[a] + nreach[nb]
+                if point_gap2(nbox, nb, anc[a, 0] - ox, anc[a, 1] - oy,
+                              anc[a, 2] - oz) > ra * ra:
+                    continue
+                tests += ntop[nb, END] - ntop[nb, START]
+                for b in range(ntop[nb, START], ntop[nb, END]):
+                    if a == b:
+                        continue  # a particle never meets its own image
+                    if pair_reach_ok(anc, reach, a, b, ox, oy, oz):
+                        if count < cap:
+                            out_a[count] = a
+                            out_e[count] = (b << 5) | img
+                        count += 1
+            continue
+        split_a = lb < 0
+        if la >= 0 and lb >= 0:
+            ea = max(nbox[na, 3] - nbox[na, 0], nbox[na, 4] - nbox[na, 1],
+                     nbox[na, 5] - nbox[na, 2])
+            eb = max(nbox[nb, 3] - nbox[nb, 0], nbox[nb, 4] - nbox[nb, 1],
+                     nbox[nb, 5] - nbox[nb, 2])
+            split_a = ea >= eb
+        stack[sp, 2] = img
+        stack[sp + 1, 2] = img
+        if split_a:
+            stack[sp, 0] = la
+            stack[sp, 1] = nb
+            stack[sp + 1, 0] = ntop[na, RIGHT]
+            stack[sp + 1, 1] = nb
+        else:
+            stack[sp, 0] = na
+            stack[sp, 1] = lb
+            stack[sp + 1, 0] = na
+            stack[sp + 1, 1] = ntop[nb, RIGHT]
+        sp += 2
     work[0] = visits
     work[1] = tests
     return count

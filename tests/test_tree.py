@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as hs
 
 from lockgraph.domains import Dish, PeriodicCube, ShearingSheet
-from lockgraph.tree import build, count_nodes, node_bounds, pair_search
+from lockgraph.tree import build, count_nodes, node_bounds, pair_search, search_tasks
 
 
 def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
@@ -34,8 +34,8 @@ def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
     while True:
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
-        m = pair_search(anc, reach, ntop, nbox, nreach, half, img_pos, out_a, out_e,
-                        np.zeros((4096, 2), np.int64), np.zeros(2))
+        m = pair_search(anc, reach, ntop, nbox, nreach, search_tasks(ntop, half, 1)[0], img_pos,
+                        out_a, out_e, np.zeros((4096, 3), np.int64), np.zeros(2))
         if m <= cap:
             break
         cap = m
