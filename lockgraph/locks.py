@@ -214,7 +214,7 @@ class LockRegions:
                 "mean_degree": float(d.mean()) if d.size else 0.0,
                 "max_degree": int(d.max()) if d.size else 0,
                 "mean_particles": float(occupied[occupied > 0].mean()) if occupied.any() else 0.0,
-                **self.info}
+                **{k: v for k, v in self.info.items() if not isinstance(v, np.ndarray)}}
 
     def adjacent(self, a, b):
         """True if regions a and b are the same or adjacent."""

@@ -25,8 +25,10 @@ sum of the step times):
   prediction, so only i is predicted again) write only i.  A stale event still
   waits for j's latest writer: that is the collision that made it stale, and
   it reads j's collision counter.  Events with no such predecessor are ready at
-  time 0.  (Taking the single most recent of the two writers would let e start
-  while the other, earlier writer is still running on another thread.)
+  time 0.  (Taking only the most recent of all earlier events that involve i
+  or j — ``ReplayTrace(trace, dependencies="latest")``, kept for comparison —
+  would let e start before the other particle's last writer has finished, or
+  even started: events of one particle could run out of order.)
 * **Locks.**  Event e holds the lock regions A_e = {region[i], region[j]}
   ({region[i]} for walls) from its claim to its finish.  A waiting event is
   *clear* of a running one when, for policy ``"paper"``, none of its regions is
@@ -63,13 +65,20 @@ steps.  The convention here and in ``benchmarks/paper_tables.py``:
 
 ``calibrate`` finds the ``overhead`` that makes the replay at P threads last
 ``T_events``; that overhead then also absorbs what the threaded run spends per
-event beyond ``c_e`` (queue updates, lock checks, shared cache lines, and the
-per-step dispatch spread over the step's claims) — the point of fitting it
-rather than guessing it.  With few events per step the dispatch dominates and
-the fitted overhead is large: read it together with the event count.
+event beyond ``c_e`` (queue updates, lock checks, shared cache lines) — the
+point of fitting it rather than guessing it.  Measure the per-step cost of
+starting and joining the threads separately (a threaded step with no events)
+and pass it as ``step_overhead``; otherwise it too is spread over the claims,
+which with few events per step makes the fitted overhead large.  One
+measurement cannot tell serialized per-event cost from parallel per-event
+cost: ``calibrate(fit="per_event")`` gives the other bound.  A 2-thread run
+slower than the sequential one, fitted as serialized overhead, makes the
+replay flat in P (the claims are the bottleneck); fitted as ``per_event`` it
+scales.
 
 The inner loops are numba kernels (``lockgraph._jit.kernel``: no NRT, no
-allocation), fed with work arrays allocated here.  About 1e7 events per second.
+allocation), fed with work arrays allocated here: a step of 2e5 events replays
+in about 0.05 s.
 """
 import math
 
@@ -80,6 +89,7 @@ from ._jit import kernel
 KIND_PAIR, KIND_WALL, KIND_STALE = 0, 1, 2
 POLICIES = ("exact", "paper")
 FITS = ("overhead", "per_event")
+DEPENDENCIES = ("writers", "latest")
 # out[] slots of _simulate
 O_TIME, O_BLOCKED, O_PASSED, O_STALLS, O_CLAIMS, O_ERR = range(6)
 NOUT = 8
@@ -88,8 +98,11 @@ NOUT = 8
 # ---- kernels -------------------------------------------------------------------
 
 @kernel
-def _dependencies(ev_i, ev_j, ev_kind, last, parents, pend, coff, cadj):
+def _dependencies(ev_i, ev_j, ev_kind, single, last, parents, pend, coff, cadj):
     """Creation dependencies of one step's events, as a child list.
+
+    single: the "latest" rule (one parent: the latest earlier event naming i or
+    j, stale events counting as writing j) instead of the "writers" rule.
 
     ev_i, ev_j, ev_kind (m,) int64: the events in trace order (j = -1: wall).
     last (n,) int64: work, the latest writer of each particle (set to -1 here).
@@ -108,6 +121,9 @@ def _dependencies(ev_i, ev_j, ev_kind, last, parents, pend, coff, cadj):
         j = ev_j[e]
         pa = last[i]
         pb = last[j] if j >= 0 else -1
+        if single:
+            pa = max(pa, pb)
+            pb = -1
         if pb == pa:
             pb = -1
         parents[e, 0] = pa
@@ -122,7 +138,7 @@ def _dependencies(ev_i, ev_j, ev_kind, last, parents, pend, coff, cadj):
         pend[e] = k
         # only what an event changes makes later events wait for it
         last[i] = e
-        if j >= 0 and ev_kind[e] == KIND_PAIR:
+        if j >= 0 and (ev_kind[e] == KIND_PAIR or single):
             last[j] = e
     for e in range(m):
         coff[e + 1] += coff[e]
@@ -331,9 +347,16 @@ class ReplayTrace:
     ``trace`` is the dict of ``Engine.trace()``: ``steps`` (list of {"events":
     structured array t, cycles, i, j, kind; "locks": {key: (region (N,) int32,
     loff (R+1,) int64, ladj (E,) int32)}}), ``cycles_per_second``, ``n``, ``dt``.
+    ``dependencies``: "writers" (default: wait for the latest writers of i and
+    of j) or "latest" (wait for the one latest event naming i or j); see the
+    module docstring.
     """
 
-    def __init__(self, trace):
+    def __init__(self, trace, dependencies="writers"):
+        if dependencies not in DEPENDENCIES:
+            raise ValueError(f"dependencies must be one of {DEPENDENCIES}, "
+                             f"got {dependencies!r}")
+        self.dependencies = dependencies
         self.cps = float(trace["cycles_per_second"])
         if not self.cps > 0:
             raise ValueError(f"cycles_per_second must be > 0, got {self.cps!r}")
@@ -355,7 +378,8 @@ class ReplayTrace:
             pend = np.zeros(m, np.int64)
             coff = np.zeros(m + 1, np.int64)
             cadj = np.zeros(max(2 * m, 1), np.int64)
-            _dependencies(ei, ej, ek, last, parents, pend, coff, cadj)
+            _dependencies(ei, ej, ek, dependencies == "latest", last, parents, pend, coff,
+                          cadj)
             self.steps.append({"i": ei, "j": ej, "cost": cost, "pend": pend, "coff": coff,
                                "cadj": cadj, "parents": parents, "regions": {}})
 

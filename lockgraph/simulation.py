@@ -91,6 +91,7 @@ class Simulation:
         self.dt = self._engine.dt
         self.wall_s = 0.0
         self.steps = 0
+        self.history = []  # one dict of statistics per step
 
     def run(self, steps, progress=None):
         """Advance ``steps`` steps.  ``progress(done, steps)`` is called after each step.
@@ -102,12 +103,26 @@ class Simulation:
         eng = self._engine
         for k in range(int(steps)):
             t0 = _time.perf_counter()
-            eng.step(check_end=k == steps - 1)
-            self.wall_s += _time.perf_counter() - t0
+            st = eng.step(check_end=k == steps - 1)
+            w = _time.perf_counter() - t0
+            self.wall_s += w
             self.steps += 1
+            self.history.append(self._step_record(st, w))
             if progress is not None:
                 progress(k + 1, int(steps))
         return self
+
+    def _step_record(self, st, wall):
+        eng = self._engine
+        return {
+            "step": self.steps, "wall_s": wall, "events": int(st[K.S_POPS]),
+            "collisions": int(st[K.S_PAIR] + st[K.S_WALL]),
+            "mean_concurrency": float(st[K.S_CONC] / st[K.S_ECYC]) if st[K.S_ECYC] else 1.0,
+            "blocked_picks": int(st[K.S_BLOCKED]),
+            "violations": int(st[K.S_VIOL] + st[K.S_REACHOUT]),
+            "repairs": eng.repairs,
+            "wait_s": float(st[K.S_WAIT]) / cycles_per_second() if st[K.S_WAIT] else 0.0,
+        }
 
     @property
     def state(self):

@@ -110,3 +110,16 @@ def test_scenes_listing(capsys):
     out = capsys.readouterr().out
     for name in ("ring", "ring_moonlet", "dish", "dish_marble", "gas"):
         assert name in out
+
+
+def test_threads_json_reports_parallel_statistics(capsys):
+    one = run_json(capsys, "ring", "--n", "600", "--steps", "6", "--param", "dispersion=0.003",
+                   "--param", "dt=60")
+    two = run_json(capsys, "ring", "--n", "600", "--steps", "6", "--param", "dispersion=0.003",
+                   "--param", "dt=60", "--threads", "2", "--lock", "graph", "--scale", "2",
+                   "--policy", "exact")
+    assert two["state_sha256"] == one["state_sha256"]
+    for k in ("events", "mean_concurrency", "blocked_picks", "violations", "repairs", "wait_s"):
+        assert k in two
+    assert two["threads"] == 2 and two["lock"] == "graph" and two["scale"] == 2.0
+    assert two["stats"]["locks"]["regions"] >= 1

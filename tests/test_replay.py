@@ -97,14 +97,17 @@ def independent_trace(m, seed=0):
 
 # ---- synthetic traces with known answers ----------------------------------------
 
-@pytest.mark.parametrize("overhead", [0.0, 2e-7])
-def test_one_thread_is_the_sum_of_costs_and_claims(overhead):
+@pytest.mark.parametrize("overhead, per_event, step_overhead",
+                         [(0.0, 0.0, 0.0), (2e-7, 0.0, 0.0), (2e-7, 1e-7, 3e-6)])
+def test_one_thread_is_the_sum_of_costs_and_claims(overhead, per_event, step_overhead):
     tr = random_trace(1)
     m = sum(len(s["events"]) for s in tr["steps"])
     work = sum(s["events"]["cycles"].sum() for s in tr["steps"]) / CPS
     for policy in R.POLICIES:
-        r = R.replay(tr, KEY, 1, policy=policy, overhead=overhead)
-        assert r["time"] == pytest.approx(work + m * overhead, rel=RTOL_SUM)
+        r = R.replay(tr, KEY, 1, policy=policy, overhead=overhead, per_event=per_event,
+                     step_overhead=step_overhead)
+        expect = work + m * (overhead + per_event) + len(tr["steps"]) * step_overhead
+        assert r["time"] == pytest.approx(expect, rel=RTOL_SUM)
         assert sum(r["step_times"]) == pytest.approx(r["time"], rel=RTOL_SUM)
         assert r["work"] == pytest.approx(work, rel=RTOL_SUM)
         assert r["events"] == m and r["blocked"] == 0
@@ -159,6 +162,16 @@ def test_waits_for_both_particles_latest_writers():
     r = R.replay(tr, KEY, 4, schedule=True)
     assert r["start"][0][2] == pytest.approx(1000 / CPS, rel=RTOL_SUM)
     assert r["time"] == pytest.approx(1100 / CPS, rel=RTOL_SUM)
+
+
+def test_latest_rule_waits_for_one_parent_only():
+    # as above, under the single-parent rule e2 waits only for e1 (the latest)
+    ev = events([0, 2, 1], [1, 3, 2], [1000, 100, 100])
+    rt = R.ReplayTrace(trace([(ev, np.arange(4), 4, [])], 4), dependencies="latest")
+    assert rt.steps[0]["parents"].tolist() == [[-1, -1], [-1, -1], [1, -1]]
+    # e2 shares particle 1's region with e0, so the locks still keep them apart
+    r = rt.replay(KEY, 4, schedule=True)
+    assert r["start"][0][2] == pytest.approx(1000 / CPS, rel=RTOL_SUM)
 
 
 def test_stale_event_does_not_hold_back_its_partner():
@@ -220,6 +233,16 @@ def test_calibrate_recovers_a_known_overhead(overhead):
     assert got == pytest.approx(overhead, rel=0.05)
     # a measured time below the zero-overhead replay gives zero
     assert R.calibrate(rt, KEY, 0.5 * rt.replay(KEY, 2)["time"]) == 0.0
+
+
+@pytest.mark.parametrize("per_event", [1e-7, 1e-6])
+def test_calibrate_recovers_a_known_per_event_cost(per_event):
+    rt = R.ReplayTrace(random_trace(6, m=2000, nx=10, ny=10))
+    step = 2e-5
+    measured = rt.replay(KEY, 2, per_event=per_event, step_overhead=step)["time"]
+    got = R.calibrate(rt, KEY, measured, threads=2, fit="per_event", step_overhead=step)
+    # time grows with per_event at a slope of about m / P: as for the overhead above
+    assert got == pytest.approx(per_event, rel=0.05)
 
 
 def test_bad_input():
