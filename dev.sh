@@ -3,7 +3,9 @@
 #
 #   ./dev.sh report   the main job: run the default scene (ring) and write out/
 #   ./dev.sh test     set up, then run the test and validation suites
-#   ./dev.sh bench    the benchmarks (throughput, memory)
+#   ./dev.sh bench [throughput|parallel|tables] [ARGS]
+#                     a benchmark: one-core throughput and memory (default),
+#                     2-thread speedup, or the paper's tables by replay
 #   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS
 #
 # Set-up is idempotent: a virtualenv in .venv (or $LOCKGRAPH_VENV) with the
@@ -69,8 +71,14 @@ case "$cmd" in
         "$PY" -c "import json; d=json.load(open('out/ring.json')); print({k: d[k] for k in ('scene','state','n','steps','collisions','events_per_s','max_overlap','state_sha256')})" ;;
     bench)
         setup_python
-        exec "$PY" benchmarks/throughput.py "$@" ;;
+        which="throughput"
+        case "${1:-}" in throughput|parallel|tables) which="$1"; shift ;; esac
+        case "$which" in
+            throughput) exec "$PY" benchmarks/throughput.py "$@" ;;
+            parallel) exec "$PY" benchmarks/parallel_speedup.py "$@" ;;
+            tables) exec "$PY" benchmarks/paper_tables.py "$@" ;;
+        esac ;;
     *)
-        sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
         [ "$cmd" = help ] || exit 2 ;;
 esac

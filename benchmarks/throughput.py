@@ -3,7 +3,9 @@
     python benchmarks/throughput.py [--quick] [--skip-memory] [--out results.json]
 
 * gas at eta = 0.45, N = 4,000 and 32,000 (equilibrated state): pair
-  collisions per second of wall time on one core.  Reference point: a fast C++
+  collisions per second of wall time on one core, at the step and skin tuned for
+  throughput (``GAS_TUNED``; the scene's own dt is shown beside it at 32,000).
+  Reference point: a fast C++
   event-driven code reaches 3.9e5-9.5e5 collisions per CPU-second on this kind
   of machine; target here >= 4e5 at N = 32,000.
 * ring and ring_moonlet (late states), dish and dish_marble (settled bed):
@@ -35,18 +37,28 @@ from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
 
+# Gas step and skin for throughput: the sweep dt in {0.05, 0.075, 0.1} x skin in
+# {0, 0.25, 0.35, 0.5, 0.75, 1} at N = 32,000 (2026-11-22, this machine) peaked at
+# dt = 0.075 (about one collision per particle per step) with skin 0.75: a longer
+# step spreads the per-step tree, pair search and first predictions over more
+# collisions; a larger skin makes re-searches after speed-ups rare, at the price
+# of longer candidate lists.  The scene's own dt = 0.05 is printed beside it.
+GAS_TUNED = {"dt": 0.075, "skin": 0.75}
+
+
 def timed_runs(cases, repeats, seconds):
     """Interleave the cases; each run lasts about ``seconds``.  Returns per-case
     lists of (collisions/s, particle-steps/s)."""
     engines = {}
-    for name, (sc, steps_hint) in cases.items():
-        eng = Engine(sc.state, sc.physics, sc.dt)
+    for name, (sc, steps_hint, opts) in cases.items():
+        opts = dict(opts)
+        eng = Engine(sc.state, sc.physics, opts.pop("dt", sc.dt), **opts)
         eng.step()  # first step: lists and pools grow to size
         engines[name] = eng
     out = {name: [] for name in cases}
     for _ in range(repeats):
         for name, eng in engines.items():
-            sc, steps_hint = cases[name]
+            sc, steps_hint, _ = cases[name]
             c0 = eng.totals[0] + eng.totals[1]
             t0 = time.perf_counter()
             steps = 0
@@ -115,15 +127,19 @@ def main():
     cases = {}
     for n in (4000, 32000):
         say(f"preparing gas N={n} (equilibrating)")
-        cases[f"gas eta=0.45 N={n}"] = (scenarios.load("gas", "late", n=n,
-                                                         params={"late_time": 5.0}), 3)
+        sc = scenarios.load("gas", "late", n=n, params={"late_time": 5.0})
+        cases[f"gas eta=0.45 N={n}"] = (sc, 3, GAS_TUNED)
+        if n == 32000:
+            # the scene's own step and skin, side by side with the tuned ones
+            cases[f"gas N={n} dt={sc.dt:g} skin=0.5"] = (sc, 3, {})
     say("preparing ring and ring_moonlet (late), dish and dish_marble (settled)")
-    cases["ring late N=20000"] = (scenarios.load("ring", "late", n=20000, progress=say), 5)
+    cases["ring late N=20000"] = (scenarios.load("ring", "late", n=20000, progress=say), 5, {})
     cases["ring_moonlet late N=20000"] = (scenarios.load("ring_moonlet", "late", n=20000,
-                                                         progress=say), 5)
-    cases["dish settled N=2000"] = (scenarios.load("dish", "late", n=2000, progress=say), 20)
+                                                         progress=say), 5, {})
+    cases["dish settled N=2000"] = (scenarios.load("dish", "late", n=2000, progress=say),
+                                    20, {})
     cases["dish_marble settled N=2001"] = (scenarios.load("dish_marble", "late", n=2001,
-                                                          progress=say), 20)
+                                                          progress=say), 20, {})
     runs = timed_runs(cases, args.repeats, seconds)
     print(f"\n{'case':28s} {'collisions/s (best)':>20s} {'spread':>9s} {'particle-steps/s':>17s}")
     for name, vals in runs.items():
