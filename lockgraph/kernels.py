@@ -78,6 +78,19 @@ def position_at(pos, vel, i, t):
 
 
 @kernel(inline=True)
+def overlap_now(pos, i, j, img, img_pos, contact):
+    """Relative overlap (contact - distance) / contact of i and image img of j at
+    the step start; 0 if they do not touch."""
+    dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
+    dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
+    dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 < contact * contact:
+        return (contact - math.sqrt(d2)) / contact
+    return 0.0
+
+
+@kernel(inline=True)
 def predict(i, t_now, parts, nbrs, evq, cfg):
     """Set particle i's earliest event at or after t_now (ties: partner id, image)."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
@@ -434,14 +447,9 @@ def init_events(parts, nbrs, evq, cfg, st):
                 continue  # the pair was offered from j's list
             img = e & 31
             contact = ri + rad[j]
-            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
-            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
-            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 < contact * contact:
-                ov = (contact - math.sqrt(d2)) / contact
-                if ov > st[S_MAXOV]:
-                    st[S_MAXOV] = ov
+            ov = overlap_now(pos, i, j, img, img_pos, contact)
+            if ov > st[S_MAXOV]:
+                st[S_MAXOV] = ov
             t = pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, 0.0, t_end)
             if t < INF:
                 _offer(i, t, e, ids[j] * 32 + img, evt, evp, evc, ids, ncoll)
@@ -498,15 +506,9 @@ def init_range(parts, nbrs, evq, cfg, st, lo, hi):
             if j < i:
                 continue
             img = e & 31
-            contact = rad[i] + rad[j]
-            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
-            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
-            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 < contact * contact:
-                ov = (contact - math.sqrt(d2)) / contact
-                if ov > st[S_MAXOV]:
-                    st[S_MAXOV] = ov
+            ov = overlap_now(pos, i, j, img, img_pos, rad[i] + rad[j])
+            if ov > st[S_MAXOV]:
+                st[S_MAXOV] = ov
 
 
 @kernel
