@@ -6,6 +6,9 @@
                         [--policy exact|paper] [--param KEY=VALUE ...]
                         [--save FILE.npz] [--json] [--quiet]
 
+    lockgraph compare SCENE --against rebound [--state early|late] [--n N] [--orbits X]
+                        [--seed S] [--seeds K] [--k K] [--dt-orbits X] [--json]
+
 Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
 could not continue (the state is left at the last completed step; nothing is saved).
 """
@@ -122,6 +125,45 @@ def cmd_run(args):
     return 0
 
 
+def cmd_compare(args):
+    import math
+
+    from . import scenarios
+    from .compare import AGAINST, compare_ring
+
+    if args.against not in AGAINST:
+        raise InputError("against", f"unknown value {args.against!r}; one of "
+                                    f"{', '.join(AGAINST)} (LAMMPS and LIGGGHTS: issue #5)")
+    if args.seeds < 2:
+        raise InputError("seeds", f"need at least 2 replicate seeds, got {args.seeds}")
+    progress = Progress(not args.quiet, f"compare {args.scene}")
+    seeds = [args.seed + k for k in range(args.seeds)]
+    res = compare_ring(args.scene, state=args.state, n=args.n, orbits=args.orbits, seeds=seeds,
+                       k=args.k, rebound_dt_orbits=args.dt_orbits,
+                       params=scenarios.parse_overrides(args.param), progress=progress.message)
+    if args.json:
+        print(json.dumps(res, default=_jsonable))
+        return 0
+    print(f"{args.scene} ({args.state}), N = {res['n']}, {res['orbits']:g} orbits, seeds "
+          f"{res['seeds']}; agreement within k = {res['k']:g} sigma of the replicate scatter")
+    print(f"{'observable':18s} {'lockgraph':>12s} {'REBOUND':>12s} {'uncertainty':>12s} "
+          f"{'z':>7s}  agree")
+    for name, o in res["observables"].items():
+        z = o["z"]
+        zs = f"{z:7.2f}" if math.isfinite(z) else f"{z:>7}"
+        print(f"{name:18s} {o['lockgraph']:12.4g} {o['reference']:12.4g} "
+              f"{o['uncertainty']:12.3g} {zs}  {'yes' if o['agree'] else 'NO'}")
+    f = res["reference_failures"]
+    print(f"agree: {res['agree']}; wall: lockgraph {res['wall_s']['lockgraph']:.1f} s, REBOUND "
+          f"{res['wall_s']['reference']:.1f} s")
+    print(f"REBOUND: {f['overlaps']} collisions resolved while overlapping (largest "
+          f"{f['max_overlap']:.3g} of the contact distance), {f['missed_collisions']} fewer "
+          f"collisions than lockgraph ({100 * f['missed_fraction']:.1f} %), "
+          f"{f['lost_particles']} particles lost; lockgraph largest overlap "
+          f"{res['lockgraph_failures']['max_overlap']:.2g}")
+    return 0
+
+
 def _jsonable(v):
     import numpy as np
 
@@ -157,6 +199,22 @@ def parser():
     r.add_argument("--json", action="store_true", help="print one JSON object")
     r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     r.set_defaults(func=cmd_run)
+    c = sub.add_parser("compare", help="compare a scene against a reference code")
+    c.add_argument("scene", help="ring or ring_moonlet")
+    c.add_argument("--against", required=True, help="rebound")
+    c.add_argument("--state", choices=("early", "late"), default="late")
+    c.add_argument("--n", type=int, default=2000)
+    c.add_argument("--orbits", type=float, default=2.0, help="run length in orbits (2)")
+    c.add_argument("--seed", type=int, default=1, help="first seed (1)")
+    c.add_argument("--seeds", type=int, default=3, help="replicates: seeds seed.. (3)")
+    c.add_argument("--k", type=float, default=3.0, help="agreement within k sigma (3)")
+    c.add_argument("--dt-orbits", type=float, default=1e-3,
+                   help="REBOUND's step in orbits (1e-3)")
+    c.add_argument("--param", action="append", metavar="KEY=VALUE",
+                   help="override a scene parameter (repeatable)")
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    c.set_defaults(func=cmd_compare)
     return p
 
 

@@ -58,7 +58,7 @@ NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
  S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT,
- S_ECYC) = range(19)
+ S_ECYC, S_XFLUX) = range(20)
 NSTAT = 24
 # status codes
 (OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL,
@@ -321,6 +321,8 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
             tlast[j] = now
         st[S_PAIR] += 1
         st[S_VIRIAL] += imp * dist
+        # y-momentum carried across x by the impulse (collisional stress P_xy)
+        st[S_XFLUX] += imp * ny * dx
         log_event(jour, ctr, t, ids[i], ids[j], img)
         contact = rad[i] + rad[j]
         ov = (contact - dist) / contact

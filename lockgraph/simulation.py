@@ -124,6 +124,10 @@ class Simulation:
             "wait_s": float(st[K.S_WAIT]) / cycles_per_second() if st[K.S_WAIT] else 0.0,
         }
 
+    def close(self):
+        """Stop the worker threads (threads > 1); the simulation cannot run after."""
+        self._engine.close()
+
     @property
     def state(self):
         """The current state, ordered by particle id (a copy)."""
@@ -153,6 +157,8 @@ class Simulation:
             "max_overlap": max(float(t[K.S_MAXOV]), self.initial_overlap),
             "max_collisions_per_step": int(t[K.S_MAXCIS]),
             "virial": float(t[K.S_VIRIAL]),
+            # sum over pair collisions of (x_i - x_j) * (y-momentum given to i), kg m^2/s
+            "momentum_flux_xy": float(t[K.S_XFLUX]),
             "floor_impulse": float(t[K.S_FLOORIMP]),
             "cylinder_impulse": float(t[K.S_CYLIMP]),
             "wall_s": self.wall_s,

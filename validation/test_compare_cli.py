@@ -1,0 +1,33 @@
+"""``lockgraph compare`` against REBOUND: the JSON report's shape and its errors."""
+import json
+
+from lockgraph.cli import main
+
+OBSERVABLES = ("sigma_x", "sigma_y", "sigma_z", "thickness", "tau", "filling_midplane",
+               "nu_trans", "collision_rate", "nu_coll")
+
+
+def test_compare_json_report(rebound, capsys):
+    code = main(["compare", "ring", "--against", "rebound", "--n", "400", "--orbits", "0.2",
+                 "--seeds", "2", "--dt-orbits", "2e-3", "--json", "--quiet"])
+    assert code == 0
+    res = json.loads(capsys.readouterr().out)
+    assert set(OBSERVABLES) <= set(res["observables"])
+    for o in res["observables"].values():
+        for key in ("lockgraph", "reference", "uncertainty", "z", "agree", "unit"):
+            assert key in o
+    assert isinstance(res["agree"], bool)
+    assert res["wall_s"]["lockgraph"] > 0 and res["wall_s"]["reference"] > 0
+    for key in ("overlaps", "max_overlap", "missed_collisions", "lost_particles"):
+        assert key in res["reference_failures"]
+    assert res["lockgraph_failures"]["max_overlap"] < 1e-12
+    assert res["seeds"] == [1, 2] and res["reference_settings"]["dt_orbits"] == 2e-3
+
+
+def test_compare_bad_input(capsys):
+    assert main(["compare", "ring", "--against", "gadget", "--quiet"]) == 2
+    assert "against" in capsys.readouterr().err
+    assert main(["compare", "ring", "--against", "rebound", "--seeds", "1", "--quiet"]) == 2
+    assert "seeds" in capsys.readouterr().err
+    assert main(["compare", "dish", "--against", "rebound", "--quiet"]) == 2
+    assert "scene" in capsys.readouterr().err
