@@ -3,9 +3,10 @@
 #
 #   ./dev.sh report   the main job: run the default scene (ring) and write out/
 #   ./dev.sh test     set up, then run the test and validation suites
-#   ./dev.sh bench [throughput|parallel|tables] [ARGS]
+#   ./dev.sh bench [throughput|parallel|tables|rebound] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
-#                     2-thread speedup, or the paper's tables by replay
+#                     2-thread speedup, the paper's tables by replay, or speed
+#                     against accuracy versus REBOUND
 #   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS
 #
 # Set-up is idempotent: a virtualenv in .venv (or $LOCKGRAPH_VENV) with the
@@ -72,13 +73,14 @@ case "$cmd" in
     bench)
         setup_python
         which="throughput"
-        case "${1:-}" in throughput|parallel|tables) which="$1"; shift ;; esac
+        case "${1:-}" in throughput|parallel|tables|rebound) which="$1"; shift ;; esac
         case "$which" in
             throughput) exec "$PY" benchmarks/throughput.py "$@" ;;
             parallel) exec "$PY" benchmarks/parallel_speedup.py "$@" ;;
             tables) exec "$PY" benchmarks/paper_tables.py "$@" ;;
+            rebound) exec "$PY" benchmarks/rebound_speed_accuracy.py "$@" ;;
         esac ;;
     *)
-        sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
         [ "$cmd" = help ] || exit 2 ;;
 esac
