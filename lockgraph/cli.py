@@ -159,8 +159,10 @@ def cmd_compare(args):
     print(f"REBOUND: {f['overlaps']} collisions resolved while overlapping (largest "
           f"{f['max_overlap']:.3g} of the contact distance), {f['missed_collisions']} fewer "
           f"collisions than lockgraph ({100 * f['missed_fraction']:.1f} %), "
-          f"{f['lost_particles']} particles lost; lockgraph largest overlap "
-          f"{res['lockgraph_failures']['max_overlap']:.2g}")
+          f"{f['lost_particles']} particles lost; with the largest body "
+          f"{f['largest_body_overlaps']} overlapping (largest "
+          f"{f['largest_body_max_overlap']:.3g}); "
+          f"lockgraph largest overlap {res['lockgraph_failures']['max_overlap']:.2g}")
     return 0
 
 

@@ -94,7 +94,9 @@ def _run_rebound(sc, duration, dt, samples, collision):
                         float(sc.state.mass.sum()), d.omega, steps * dt))
     info = {"wall_s": ref.wall_s, "collisions": log["resolved"], "steps": steps,
             "overlapping": log["overlapping"], "max_overlap": log["max_overlap"],
-            "rejected": log["rejected"], "lost": ref.lost}
+            "rejected": log["rejected"], "lost": ref.lost,
+            "largest_overlapping": log["largest_overlapping"],
+            "largest_max_overlap": log["largest_max_overlap"]}
     return obs, info
 
 
@@ -151,6 +153,9 @@ def compare_ring(scene="ring", state="late", n=2000, orbits=2.0, seeds=(1, 2, 3)
             "overlaps": int(sum(r["overlapping"] for r in lb)),
             "max_overlap": max(r["max_overlap"] for r in lb),
             "lost_particles": int(sum(r["lost"] for r in lb)),
+            # collisions with the largest body (the moonlet) resolved while overlapping
+            "largest_body_overlaps": int(sum(r["largest_overlapping"] for r in lb)),
+            "largest_body_max_overlap": max(r["largest_max_overlap"] for r in lb),
             # collisions REBOUND resolved fewer than lockgraph (missed or merged)
             "missed_collisions": int(sum(x["collisions"] - y["collisions"]
                                          for x, y in zip(la, lb))),

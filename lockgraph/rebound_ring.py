@@ -85,7 +85,9 @@ class ReboundRing:
                     vx=float(v[0]), vy=float(v[1]), vz=float(v[2]))
         self._restitution(sim, physics.restitution)
         self._log = {"detected": 0, "resolved": 0, "rejected": 0, "overlapping": 0,
-                     "max_overlap": 0.0, "momentum_flux_xy": 0.0}
+                     "max_overlap": 0.0, "momentum_flux_xy": 0.0,
+                     "largest_overlapping": 0, "largest_max_overlap": 0.0}
+        self.largest = int(np.argmax(state.radius))  # the moonlet, if there is one
         self._wrap_resolver(sim)
         self.sim = sim
         self.wall_s = 0.0
@@ -113,6 +115,7 @@ class ReboundRing:
         hard = rb.clibrebound.reb_collision_resolve_hardsphere
         hard.restype = ctypes.c_int
         log = self._log
+        big = self.largest
 
         def resolve(sim_ptr, c):
             ps = sim_ptr.contents._particles
@@ -134,6 +137,9 @@ class ReboundRing:
                 if ov > 0:
                     log["overlapping"] += 1
                     log["max_overlap"] = max(log["max_overlap"], ov)
+                    if c.p1 == big or c.p2 == big:
+                        log["largest_overlapping"] += 1
+                        log["largest_max_overlap"] = max(log["largest_max_overlap"], ov)
             else:
                 log["rejected"] += 1
             return out
@@ -156,7 +162,9 @@ class ReboundRing:
     def log(self):
         """Collision statistics so far: pairs detected, resolved (velocities
         changed), rejected (no longer overlapping or receding), overlapping when
-        resolved, the largest relative overlap, sum of (x1 - x2) dp_y,1."""
+        resolved, the largest relative overlap, sum of (x1 - x2) dp_y,1, and
+        the overlapping count and largest overlap of the collisions involving
+        the largest body (the moonlet, if any)."""
         return dict(self._log)
 
     def arrays(self):

@@ -139,9 +139,12 @@ def test_ring_moonlet_differences_are_reported(rebound):
     res = compare_ring("ring_moonlet", state="early", n=1500, orbits=0.5, seeds=(1, 2), k=K_SIGMA)
     f = res["reference_failures"]
     print(f"ring_moonlet: REBOUND overlaps {f['overlaps']}, largest {f['max_overlap']:.3g}; "
+          f"with the moonlet {f['largest_body_overlaps']}, largest "
+          f"{f['largest_body_max_overlap']:.3g}; "
           f"lockgraph largest {res['lockgraph_failures']['max_overlap']:.2g}; z: " +
           ", ".join(f"{k} {v['z']:.2f}" for k, v in res["observables"].items()))
     assert f["overlaps"] > 0 and f["max_overlap"] > 0.01
+    assert f["largest_body_overlaps"] > 0  # particles sink into the moonlet between steps
     assert res["lockgraph_failures"]["max_overlap"] < 1e-12
 
 
