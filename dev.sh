@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # lockgraph developer entry point: sets everything up on first use.
 #
-#   ./dev.sh report   the main job: run the default scene (ring) and write out/
+#   ./dev.sh report   the main job: compare the default scene (ring) with REBOUND,
+#                     print the table and write out/ring_compare.json
 #   ./dev.sh test     set up, then run the test and validation suites
 #   ./dev.sh bench [throughput|parallel|tables|rebound] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
@@ -67,9 +68,8 @@ case "$cmd" in
     report)
         setup_python
         mkdir -p out
-        say "running the default scene (ring, late state, 100 steps); JSON in out/ring.json"
-        "$VENV/bin/lockgraph" run ring --state late --steps 100 --json "$@" > out/ring.json
-        "$PY" -c "import json; d=json.load(open('out/ring.json')); print({k: d[k] for k in ('scene','state','n','steps','collisions','events_per_s','max_overlap','state_sha256')})" ;;
+        say "comparing the default scene (ring, late state) with REBOUND: 3 seeds x 2 orbits"
+        exec "$VENV/bin/lockgraph" compare ring --against rebound --out out/ring_compare.json "$@" ;;
     bench)
         setup_python
         which="throughput"
@@ -81,6 +81,6 @@ case "$cmd" in
             rebound) exec "$PY" benchmarks/rebound_speed_accuracy.py "$@" ;;
         esac ;;
     *)
-        sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'
         [ "$cmd" = help ] || exit 2 ;;
 esac

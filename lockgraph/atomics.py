@@ -124,6 +124,22 @@ def sched_yield(typingctx):
 
 
 @intrinsic
+def sleep_us(typingctx, us):
+    """Sleep ``us`` microseconds (libc ``usleep``): a long-blocked thread gives
+    its core to the threads it waits for (when threads outnumber free cores)."""
+    if not isinstance(us, types.Integer):
+        raise TypeError("sleep_us takes an integer")
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.IntType(32), [ir.IntType(32)])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "usleep")
+        builder.call(fn, [builder.trunc(args[0], ir.IntType(32))])
+        return context.get_dummy_value()
+
+    return types.none(us), codegen
+
+
+@intrinsic
 def float_bits(typingctx, x):
     """The IEEE-754 bits of a float64 as an int64 (a bit cast, no conversion)."""
     if x != types.float64:
@@ -169,8 +185,10 @@ def spin_lock(word, i):
         spins += 1
         if spins < 64:
             cpu_relax()
-        else:
+        elif spins < 4096:
             sched_yield()
+        else:
+            sleep_us(20)  # the holder is likely descheduled: let it run
 
 
 @kernel(inline=True)

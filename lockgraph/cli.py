@@ -8,6 +8,7 @@
 
     lockgraph compare SCENE --against rebound [--state early|late] [--n N] [--orbits X]
                         [--seed S] [--seeds K] [--k K] [--dt-orbits X] [--json]
+                        [--out FILE.json]
 
 Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
 could not continue (the state is left at the last completed step; nothing is saved).
@@ -141,6 +142,13 @@ def cmd_compare(args):
     res = compare_ring(args.scene, state=args.state, n=args.n, orbits=args.orbits, seeds=seeds,
                        k=args.k, rebound_dt_orbits=args.dt_orbits,
                        params=scenarios.parse_overrides(args.param), progress=progress.message)
+    if args.out:
+        import os
+
+        tmp = args.out + ".tmp"
+        with open(tmp, "w") as fh:  # never a half-written report
+            json.dump(res, fh, default=_jsonable, indent=1)
+        os.replace(tmp, args.out)
     if args.json:
         print(json.dumps(res, default=_jsonable))
         return 0
@@ -215,6 +223,7 @@ def parser():
     c.add_argument("--param", action="append", metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.add_argument("--out", metavar="FILE.json", help="also write the JSON report to FILE")
     c.add_argument("--quiet", action="store_true", help="no progress on stderr")
     c.set_defaults(func=cmd_compare)
     return p

@@ -42,7 +42,7 @@ import time
 import numpy as np
 
 from ._jit import kernel
-from .atomics import bits_float, cpu_relax, cycles, float_bits, load, sched_yield
+from .atomics import bits_float, cpu_relax, cycles, float_bits, load, sched_yield, sleep_us
 from .atomics import spin_lock, spin_unlock, store, cas
 from .events import update_queue
 from .predict import INF
@@ -59,6 +59,10 @@ NDCTL = 16
 # meet), so 4 keeps every interior event >= 3 hops from every other thread's
 # events: not even their next events can reach each other.
 INTERIOR = 4
+# a thread blocked for PARK_AFTER consecutive picks (~0.3-1 ms of yielding)
+# sleeps PARK_US per further pick instead of yielding
+PARK_AFTER = 2000
+PARK_US = 50
 
 
 @kernel
@@ -241,6 +245,7 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
     myl = d * NDCTL + DLOCK
     high = 0  # latest event time processed in this domain (bits)
     waiting = False
+    nblk = 0  # consecutive blocked picks of this thread
     wait_from = 0
     seen = -1
     while True:
@@ -320,11 +325,18 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             elif now - wait_from > stall_cycles:
                 _fail(ctrl, STALL)
                 return STALL
-            cpu_relax()
-            sched_yield()
+            nblk += 1
+            if nblk < PARK_AFTER:
+                cpu_relax()
+                sched_yield()
+            else:
+                # blocked this long: the threads it waits for may share its core
+                # (more threads than free cores); sleeping lets them run
+                sleep_us(PARK_US)
             st[S_WAIT] += cycles() - now
             continue
         waiting = False
+        nblk = 0
         c0 = cycles()
         status = OK
         jw = -1
