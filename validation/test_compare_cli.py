@@ -31,3 +31,15 @@ def test_compare_bad_input(capsys):
     assert "seeds" in capsys.readouterr().err
     assert main(["compare", "dish", "--against", "rebound", "--quiet"]) == 2
     assert "scene" in capsys.readouterr().err
+
+
+def test_compare_table_and_out_file(rebound, capsys, tmp_path):
+    out = tmp_path / "ring.json"
+    code = main(["compare", "ring", "--against", "rebound", "--n", "400", "--orbits", "0.2",
+                 "--seeds", "2", "--quiet", "--out", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    for word in ("sigma_x", "nu_coll", "agree:", "collisions: lockgraph", "REBOUND:"):
+        assert word in text
+    res = json.loads(out.read_text())
+    assert res["against"] == "rebound" and not (tmp_path / "ring.json.tmp").exists()
