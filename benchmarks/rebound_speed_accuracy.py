@@ -30,8 +30,8 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from lockgraph import ring_observables as RO  # noqa: E402
 from lockgraph import scenarios  # noqa: E402
+from lockgraph.compare import sampled, state_arrays  # noqa: E402
 from lockgraph.rebound_ring import ReboundRing  # noqa: E402
 from lockgraph.simulation import Simulation, compile_kernels  # noqa: E402
 
@@ -49,15 +49,9 @@ SAMPLES = 10
 def lockgraph_run(sc, dt, steps, threads):
     d = sc.physics.domain
     sim = Simulation(sc.state, sc.physics, dt=dt, threads=threads)
-    sig = []
-    done = 0
-    for k in range(1, SAMPLES + 1):
-        target = steps * k // SAMPLES
-        sim.run(target - done)
-        done = target
-        st = sim.state  # (the copy is outside sim.wall_s)
-        sig.append(RO.snapshot(st.pos, st.vel, st.radius, st.mass, d.omega, d.lx,
-                               d.ly)["sigma_x"])
+    # (the snapshots are outside sim.wall_s)
+    sig = [s["sigma_x"] for s in sampled(sim.run, lambda: state_arrays(sim), d, steps,
+                                         SAMPLES)]
     out = {"wall_s": sim.wall_s, "collisions": sim.stats["pair_collisions"],
            "max_overlap": sim.stats["max_overlap"], "sigma_x": sum(sig) / len(sig)}
     sim.close()
@@ -67,14 +61,7 @@ def lockgraph_run(sc, dt, steps, threads):
 def rebound_run(sc, dt, steps):
     d = sc.physics.domain
     ref = ReboundRing(sc.state, sc.physics, dt)
-    sig = []
-    done = 0
-    for k in range(1, SAMPLES + 1):
-        target = steps * k // SAMPLES
-        ref.step(target - done)
-        done = target
-        pos, vel, r, m = ref.arrays()
-        sig.append(RO.snapshot(pos, vel, r, m, d.omega, d.lx, d.ly)["sigma_x"])
+    sig = [s["sigma_x"] for s in sampled(ref.step, ref.arrays, d, steps, SAMPLES)]
     log = ref.log
     return {"wall_s": ref.wall_s, "collisions": log["resolved"],
             "max_overlap": log["max_overlap"], "sigma_x": sum(sig) / len(sig)}

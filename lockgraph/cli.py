@@ -63,8 +63,6 @@ def cmd_scenes(args):
 
 
 def cmd_run(args):
-    import numpy as np
-
     from . import scenarios
     from .observables import reduced_pressure
     from .simulation import Simulation

@@ -17,7 +17,6 @@ Snapshot observables are averaged over ``samples`` equally spaced times of
 each run (after the start); rates are taken over the whole run.
 """
 import math
-import time
 
 import numpy as np
 
@@ -55,17 +54,31 @@ def summarize(values_a, values_b, k, units=None):
     return out
 
 
-def _run_lockgraph(sc, steps, samples, threads):
-    d = sc.physics.domain
-    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads)
+def sampled(advance, arrays, domain, steps, samples):
+    """Advance ``steps`` steps in ``samples`` equal chunks (``advance(k)``) and take
+    a ``ring_observables.snapshot`` of ``arrays()`` = (pos, vel, radius, mass)
+    after each; returns the list of snapshots."""
+    d = domain
     snaps = []
     done = 0
     for s in range(1, samples + 1):
         target = int(round(steps * s / samples))
-        sim.run(target - done)
+        advance(target - done)
         done = target
-        st = sim.state
-        snaps.append(RO.snapshot(st.pos, st.vel, st.radius, st.mass, d.omega, d.lx, d.ly))
+        snaps.append(RO.snapshot(*arrays(), d.omega, d.lx, d.ly))
+    return snaps
+
+
+def state_arrays(sim):
+    """(pos, vel, radius, mass) of a lockgraph ``Simulation``, by particle id."""
+    st = sim.state
+    return st.pos, st.vel, st.radius, st.mass
+
+
+def _run_lockgraph(sc, steps, samples, threads):
+    d = sc.physics.domain
+    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads)
+    snaps = sampled(sim.run, lambda: state_arrays(sim), d, steps, samples)
     stats = sim.stats
     obs = RO.mean_snapshots(snaps)
     obs.update(RO.rates(stats["pair_collisions"], stats["momentum_flux_xy"], sc.state.n,
@@ -80,14 +93,7 @@ def _run_rebound(sc, duration, dt, samples, collision):
     d = sc.physics.domain
     ref = ReboundRing(sc.state, sc.physics, dt, collision=collision)
     steps = int(round(duration / dt))
-    snaps = []
-    done = 0
-    for s in range(1, samples + 1):
-        target = int(round(steps * s / samples))
-        ref.step(target - done)
-        done = target
-        pos, vel, r, m = ref.arrays()
-        snaps.append(RO.snapshot(pos, vel, r, m, d.omega, d.lx, d.ly))
+    snaps = sampled(ref.step, ref.arrays, d, steps, samples)
     log = ref.log
     obs = RO.mean_snapshots(snaps)
     obs.update(RO.rates(log["resolved"], log["momentum_flux_xy"], sc.state.n,

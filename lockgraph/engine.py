@@ -17,7 +17,6 @@ from the anchors and the undo journal, so the state is exactly what it was
 after the first half kick; errors then also undo that kick.
 """
 import math
-import time as _time
 
 import numpy as np
 
@@ -29,7 +28,7 @@ from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
 from .forces import kick_hill
-from .neighbors import JCOUNT, NCTR, XCOUNT, build_csr
+from .neighbors import JCOUNT, NCTR, build_csr
 from .state import State
 from .tree import (NTOP, bound_node, count_nodes, identity, node_bounds, pair_search,
                    permute_mat3, permute_vec, resort, search_tasks, skeleton, subtree_bounds)

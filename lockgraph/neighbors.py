@@ -10,7 +10,6 @@ lists (j, img) then j lists (i, 26 - img).
   collision) go to a pool of singly linked extras: ``xhead`` (N,) int32 first
   entry or -1, ``xent`` / ``xnext`` (X,) int32, and ``ctr[XCOUNT]`` entries used.
 """
-import numpy as np
 
 from ._jit import kernel
 from .atomics import cas, fetch_add, load

@@ -1,5 +1,4 @@
 """Results depend only on the physics and the ids: not on engine tuning or storage order."""
-import numpy as np
 import pytest
 
 from lockgraph import scenarios

@@ -7,7 +7,6 @@ sequence of collisions (partners and times).  The paper policy reports how many
 ordering violations it made and how far its state ended up.  Failures in a
 worker stop the run promptly and reach the caller; a stall is an error.
 """
-import hashlib
 import time
 
 import numpy as np

@@ -1,6 +1,5 @@
 """Scenes: each declares exactly the physics it uses; early states; cached late states."""
 import math
-import os
 
 import numpy as np
 import pytest

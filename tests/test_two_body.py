@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lockgraph.engine import Engine
-from lockgraph.restitution import Bridges, Constant
+from lockgraph.restitution import Bridges
 from lockgraph.physics import Physics
 from lockgraph.domains import PeriodicCube
 

@@ -4,7 +4,6 @@
                   for local use only — CI runs without it, so a missing code fails
 --paper-scale     also run the paper-scale cases (about 200,000 particles; hours)
 """
-import os
 
 import pytest
 
