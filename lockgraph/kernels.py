@@ -706,12 +706,7 @@ def overlap_report(pos, rad, noff, nent, img_pos, tol, out):
             j = e >> 5
             if j < i:
                 continue
-            img = e & 31
-            dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
-            dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
-            dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
-            c = rad[i] + rad[j]
-            ov = (c - math.sqrt(dx * dx + dy * dy + dz * dz)) / c
+            ov = overlap_now(pos, i, j, e & 31, img_pos, rad[i] + rad[j])
             if ov > tol:
                 count += 1
             if ov > worst:
