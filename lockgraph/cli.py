@@ -9,9 +9,13 @@
     lockgraph compare SCENE --against rebound [--state early|late] [--n N] [--orbits X]
                         [--seed S] [--seeds K] [--k K] [--dt-orbits X] [--json]
                         [--out FILE.json]
+    lockgraph compare dish --against lammps|liggghts [--n N] [--time T] [--seed S]
+                        [--seeds K] [--k K] [--stiffness E] [--dt-fraction F]
+                        [--ranks R] [--json] [--out FILE.json]
 
 Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
-could not continue (the state is left at the last completed step; nothing is saved).
+could not continue (the state is left at the last completed step; nothing is saved),
+4 a reference code is not installed (the message says how to install it).
 """
 import argparse
 import json
@@ -21,6 +25,7 @@ import time
 
 from . import __version__
 from .errors import InputError, SimulationError
+from .reference_codes import MissingReference
 
 
 def _peak_rss_mb():
@@ -125,40 +130,30 @@ def cmd_run(args):
 
 
 def cmd_compare(args):
-    import math
-
     from . import scenarios
     from .compare import AGAINST, compare_ring
+    from .compare_dish import AGAINST as DEM
 
-    if args.against not in AGAINST:
+    if args.against not in AGAINST + DEM:
         raise InputError("against", f"unknown value {args.against!r}; one of "
-                                    f"{', '.join(AGAINST)} (LAMMPS and LIGGGHTS: issue #5)")
+                                    f"{', '.join(AGAINST + DEM)}")
     if args.seeds < 2:
         raise InputError("seeds", f"need at least 2 replicate seeds, got {args.seeds}")
     progress = Progress(not args.quiet, f"compare {args.scene}")
     seeds = [args.seed + k for k in range(args.seeds)]
-    res = compare_ring(args.scene, state=args.state, n=args.n, orbits=args.orbits, seeds=seeds,
-                       k=args.k, rebound_dt_orbits=args.dt_orbits,
-                       params=scenarios.parse_overrides(args.param), progress=progress.message)
-    if args.out:
-        import os
-
-        tmp = args.out + ".tmp"
-        with open(tmp, "w") as fh:  # never a half-written report
-            json.dump(res, fh, default=_jsonable, indent=1)
-        os.replace(tmp, args.out)
+    params = scenarios.parse_overrides(args.param)
+    if args.against in DEM:
+        return _compare_dem(args, seeds, params, progress)
+    res = compare_ring(args.scene, state=args.state, n=args.n or 2000, orbits=args.orbits,
+                       seeds=seeds, k=args.k, rebound_dt_orbits=args.dt_orbits,
+                       params=params, progress=progress.message)
+    _write_report(args, res)
     if args.json:
         print(json.dumps(res, default=_jsonable))
         return 0
     print(f"{args.scene} ({args.state}), N = {res['n']}, {res['orbits']:g} orbits, seeds "
           f"{res['seeds']}; agreement within k = {res['k']:g} sigma of the replicate scatter")
-    print(f"{'observable':18s} {'lockgraph':>12s} {'REBOUND':>12s} {'uncertainty':>12s} "
-          f"{'z':>7s}  agree")
-    for name, o in res["observables"].items():
-        z = o["z"]
-        zs = f"{z:7.2f}" if math.isfinite(z) else f"{z:>7}"
-        print(f"{name:18s} {o['lockgraph']:12.4g} {o['reference']:12.4g} "
-              f"{o['uncertainty']:12.3g} {zs}  {'yes' if o['agree'] else 'NO'}")
+    _observable_table(res, "REBOUND")
     f = res["reference_failures"]
     print(f"agree: {res['agree']}; wall: lockgraph {res['wall_s']['lockgraph']:.1f} s, REBOUND "
           f"{res['wall_s']['reference']:.1f} s")
@@ -172,6 +167,57 @@ def cmd_compare(args):
           f"{f['largest_body_max_overlap']:.3g}); lockgraph largest overlap "
           f"{res['lockgraph_failures']['max_overlap']:.2g}")
     return 0
+
+
+def _observable_table(res, name):
+    import math
+
+    print(f"{'observable':18s} {'lockgraph':>12s} {name:>12s} {'uncertainty':>12s} "
+          f"{'z':>7s}  agree")
+    for key, o in res["observables"].items():
+        z = o["z"]
+        zs = f"{z:7.2f}" if math.isfinite(z) else f"{z:>7}"
+        print(f"{key:18s} {o['lockgraph']:12.4g} {o['reference']:12.4g} "
+              f"{o['uncertainty']:12.3g} {zs}  {'yes' if o['agree'] else 'NO'}")
+
+
+def _compare_dem(args, seeds, params, progress):
+    from .compare_dish import compare_dish
+
+    res = compare_dish(args.scene, against=args.against, n=args.n, time=args.time, seeds=seeds,
+                       k=args.k, stiffness=args.stiffness, dt_fraction=args.dt_fraction,
+                       params=params, ranks=args.ranks, progress=progress.message)
+    _write_report(args, res)
+    if args.json:
+        print(json.dumps(res, default=_jsonable))
+        return 0
+    name = "LAMMPS" if args.against == "lammps" else "LIGGGHTS"
+    rs = res["reference_settings"]
+    print(f"{args.scene}, N = {res['n']}, {res['time']:g} s from the falling block, seeds "
+          f"{res['seeds']}; {rs['code']}: Hertz E = {rs['stiffness']:g} Pa, dt = "
+          f"{rs['dt']:.3g} s (t_c / {rs['dt_fraction']:g}); agreement within k = "
+          f"{res['k']:g} sigma plus the stated allowance")
+    _observable_table(res, name)
+    fl = res["checks"]["floor_load"]
+    print(f"floor load / weight: lockgraph {fl['values']['lockgraph']}, {name} "
+          f"{fl['values']['reference']} (within {fl['tolerance']:g}: "
+          f"{'yes' if fl['pass'] else 'NO'})")
+    st = res["settle_time"]
+    print(f"settling time (rms speed < {st['rms_speed'] * 1e3:g} mm/s): lockgraph "
+          f"{st['lockgraph']} s, {name} {st['reference']} s")
+    print(f"agree: {res['agree']}; wall: lockgraph {res['wall_s']['lockgraph']:.1f} s, {name} "
+          f"{res['wall_s']['reference']:.1f} s; {name} failures: {res['reference_failures']}")
+    return 0
+
+
+def _write_report(args, res):
+    if args.out:
+        import os
+
+        tmp = args.out + ".tmp"
+        with open(tmp, "w") as fh:  # never a half-written report
+            json.dump(res, fh, default=_jsonable, indent=1)
+        os.replace(tmp, args.out)
 
 
 def _jsonable(v):
@@ -210,10 +256,18 @@ def parser():
     r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     r.set_defaults(func=cmd_run)
     c = sub.add_parser("compare", help="compare a scene against a reference code")
-    c.add_argument("scene", help="ring or ring_moonlet")
-    c.add_argument("--against", required=True, help="rebound")
-    c.add_argument("--state", choices=("early", "late"), default="late")
-    c.add_argument("--n", type=int, default=2000)
+    c.add_argument("scene", help="ring or ring_moonlet (REBOUND); dish (LAMMPS, LIGGGHTS)")
+    c.add_argument("--against", required=True, help="rebound | lammps | liggghts")
+    c.add_argument("--state", choices=("early", "late"), default="late",
+                   help="ring state (late); the dish always starts from the falling block")
+    c.add_argument("--n", type=int, help="particles (ring: 2000; dish: the scene's)")
+    c.add_argument("--time", type=float, default=0.5,
+                   help="dish: seconds to run from the falling block (0.5)")
+    c.add_argument("--stiffness", type=float, default=1e7,
+                   help="dish: DEM Young's modulus in Pa (1e7)")
+    c.add_argument("--dt-fraction", type=float, default=20.0,
+                   help="dish: DEM steps per contact time (20)")
+    c.add_argument("--ranks", type=int, default=1, help="dish: MPI ranks of the DEM code (1)")
     c.add_argument("--orbits", type=float, default=2.0, help="run length in orbits (2)")
     c.add_argument("--seed", type=int, default=1, help="first seed (1)")
     c.add_argument("--seeds", type=int, default=3, help="replicates: seeds seed.. (3)")
@@ -239,6 +293,9 @@ def main(argv=None):
     except SimulationError as exc:
         print(f"lockgraph: run stopped: {exc}", file=sys.stderr)
         return 3
+    except MissingReference as exc:
+        print(f"lockgraph: reference code missing: {exc}", file=sys.stderr)
+        return 4
     except KeyboardInterrupt:
         print("lockgraph: interrupted; nothing saved", file=sys.stderr)
         return 130

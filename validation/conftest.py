@@ -52,3 +52,18 @@ def lammps(request):
 @pytest.fixture(scope="session")
 def liggghts(request):
     return _need(request, references.liggghts_binary)
+
+
+@pytest.fixture(scope="session")
+def lammps_lmp(request):
+    """The lmp executable (the DEM harness runs LAMMPS as a subprocess)."""
+    return _need(request, references.lammps_binary)
+
+
+@pytest.fixture(scope="session")
+def dem_code(request):
+    """Check that the DEM code named by the test's ``code`` parameter is installed."""
+    def need(code):
+        loader = references.lammps_binary if code == "lammps" else references.liggghts_binary
+        return _need(request, loader)
+    return need

@@ -43,3 +43,38 @@ def test_compare_table_and_out_file(rebound, capsys, tmp_path):
         assert word in text
     res = json.loads(out.read_text())
     assert res["against"] == "rebound" and not (tmp_path / "ring.json.tmp").exists()
+
+
+def test_compare_dish_against_lammps_cli(lammps_lmp, tmp_path, capsys):
+    """The DEM comparison from the command line: a small, short dish (the JSON
+    shape is that of the REBOUND comparison)."""
+    import json
+
+    from lockgraph.cli import main
+
+    out = tmp_path / "dish.json"
+    code = main(["compare", "dish", "--against", "lammps", "--n", "200", "--time", "0.2",
+                 "--seeds", "2", "--param", "cylinder_radius=0.004", "--out", str(out),
+                 "--quiet"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "LAMMPS" in text and "packing_fraction" in text and "floor load" in text
+    res = json.loads(out.read_text())
+    assert res["against"] == "lammps" and res["n"] == 200 and res["seeds"] == [1, 2]
+    assert set(res["observables"]) == {"bed_height", "packing_fraction", "floor_coverage",
+                                       "wall_coverage"}
+    for o in res["observables"].values():
+        assert {"lockgraph", "reference", "uncertainty", "z", "agree"} <= set(o)
+    assert res["reference_settings"]["code"].startswith("LAMMPS")
+    assert res["wall_s"]["reference"] > 0
+
+
+def test_compare_unknown_code_names_the_field(capsys):
+    from lockgraph.cli import main
+
+    assert main(["compare", "dish", "--against", "yade", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "against" in err and "lammps" in err and "liggghts" in err
+    # the DEM codes compare the dish only
+    assert main(["compare", "ring", "--against", "lammps", "--quiet"]) == 2
+    assert "scene" in capsys.readouterr().err

@@ -1,0 +1,180 @@
+"""Speed against accuracy on the settling dish: lockgraph (1 and 2 threads, two
+collapse-guard times) against LAMMPS (1 rank, 2 MPI ranks) and LIGGGHTS at
+several contact stiffnesses, all from the same falling block.
+
+    python benchmarks/dem_speed_accuracy.py [--n 1000] [--time 0.35] [--seeds 2]
+                                            [--quick] [--out DIR]
+
+(about 25 minutes at the defaults; ``--quick``: no E = 1e9 reference run, the
+stiffest LAMMPS run present is the reference, about 8 minutes)
+
+Scene: the dish block of N grains in a 5 mm dish (an 11-diameter bed at
+N = 1000), run for ``--time`` s: the fall, the impact and the settling.
+
+Error: the largest difference, over the sampled times (every 10 ms), of the
+seed-averaged kinetic energy from the reference's, divided by the
+reference's largest kinetic energy; and the settling time (rms speed below
+3 mm/s) against the reference's.  Reference: LAMMPS at E = 1e9 Pa with
+dt = t_c/50 — a soft-sphere code converges to hard spheres as its contacts
+stiffen, and the two-body tests show it does so at 0.4 per decade of E.
+Noise floor: the same kinetic-energy difference between the reference's own
+seeds, over sqrt(2) (two independent realizations of a chaotic fall differ
+by this much without any method error).
+
+Wall time: the whole run of each method, summed over seeds, measured in this
+process one after another (DEM codes as subprocesses, their startup
+included).  Writes DIR/dem_speed_accuracy.csv and .png and prints, per
+method, wall time, errors, and lockgraph's time as a fraction of LAMMPS's at
+matched accuracy (target <= 1/5).
+"""
+import argparse
+import csv
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+
+from lockgraph import dem, scenarios  # noqa: E402
+from lockgraph import dish_observables as DO  # noqa: E402
+from lockgraph.compare_dish import run_dem, run_lockgraph  # noqa: E402
+from lockgraph.simulation import compile_kernels  # noqa: E402
+
+PARAMS = {"cylinder_radius": 0.005}
+
+
+def say(msg):
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
+
+def methods(quick):
+    """(label, family, settings) of every method run."""
+    out = [("lockgraph 1 thread", "lockgraph", {"threads": 1}),
+           ("lockgraph 2 threads", "lockgraph", {"threads": 2}),
+           ("lockgraph 1 thread, tc 1e-3 s", "lockgraph", {"threads": 1, "tc": 1e-3})]
+    for e_mod in (1e7, 1e8):
+        out.append((f"LAMMPS E={e_mod:g}", "LAMMPS", {"code": "lammps", "E": e_mod}))
+    out.append(("LAMMPS E=1e+08, 2 ranks", "LAMMPS 2 ranks",
+                {"code": "lammps", "E": 1e8, "ranks": 2}))
+    for e_mod in (1e7, 1e8):
+        out.append((f"LIGGGHTS E={e_mod:g}", "LIGGGHTS", {"code": "liggghts", "E": e_mod}))
+    if not quick:
+        out.append(("LAMMPS E=1e+09 (reference)", "LAMMPS",
+                    {"code": "lammps", "E": 1e9, "frac": 50}))
+    return out
+
+
+def run_one(settings, n, seed, duration):
+    params = dict(PARAMS)
+    if "tc" in settings:
+        params["tc"] = settings["tc"]
+    sc = scenarios.load("dish", "early", n=n, seed=seed, params=params)
+    if "code" in settings:
+        contact = dem.Contact("hertz", settings["E"], settings.get("frac", 20.0))
+        t, p, v, _, info = run_dem(sc, settings["code"], duration, contact,
+                                   ranks=settings.get("ranks", 1))
+    else:
+        t, p, v, _, info = run_lockgraph(sc, duration, threads=settings["threads"])
+    ke = 0.5 * np.nansum(sc.state.mass[None, :] * np.sum(v ** 2, axis=2), axis=1)
+    return {"times": t, "ke": ke, "settle": DO.settle_time(t, v), "wall_s": info["wall_s"]}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=1000)
+    ap.add_argument("--time", type=float, default=0.35)
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default="out")
+    args = ap.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    compile_kernels()
+    results = {}
+    for label, family, settings in methods(args.quick):
+        runs = []
+        for seed in range(1, args.seeds + 1):
+            say(f"{label}, seed {seed}")
+            runs.append(run_one(settings, args.n, seed, args.time))
+        results[label] = {"family": family, "runs": runs,
+                          "wall_s": sum(r["wall_s"] for r in runs),
+                          "ke": np.mean([r["ke"] for r in runs], axis=0),
+                          "settle": float(np.nanmean([r["settle"] for r in runs]))}
+        say(f"{label}: {results[label]['wall_s']:.1f} s")
+    ref_label = [k for k in results if "reference" in k] or \
+        [k for k in results if k.startswith("LAMMPS E=1e+08")]
+    ref = results[ref_label[0]]
+    scale = float(ref["ke"].max())
+    pair = ref["runs"]
+    floor = (float(np.max(np.abs(pair[0]["ke"] - pair[1]["ke"]))) / math.sqrt(2) / scale
+             if len(pair) > 1 else 0.0)
+    rows = []
+    for label, r in results.items():
+        err = float(np.max(np.abs(r["ke"] - ref["ke"]))) / scale
+        rows.append({"method": label, "family": r["family"], "wall_s": r["wall_s"],
+                     "ke_error": err, "settle_time": r["settle"],
+                     "settle_error": abs(r["settle"] - ref["settle"]),
+                     "reference": label == ref_label[0]})
+    path = os.path.join(args.out, "dem_speed_accuracy.csv")
+    with open(path + ".tmp", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(path + ".tmp", path)
+    print(f"N = {args.n}, {args.time:g} s of settling, {args.seeds} seeds; reference "
+          f"{ref_label[0]}; kinetic-energy noise floor {floor:.3f}")
+    print(f"{'method':34s} {'wall s':>8s} {'KE error':>9s} {'settle s':>9s} {'settle err':>10s}")
+    for r in rows:
+        print(f"{r['method']:34s} {r['wall_s']:8.1f} {r['ke_error']:9.3f} "
+              f"{r['settle_time']:9.3f} {r['settle_error']:10.3f}")
+    lg = [r for r in rows if r["method"] == "lockgraph 1 thread"][0]
+    la = [r for r in rows if r["family"] == "LAMMPS" and not r["reference"]]
+    # matched accuracy: the cheapest LAMMPS run at least as accurate as lockgraph
+    # (errors under the noise floor count as equal to it)
+    eps = max(lg["ke_error"], floor)
+    match = [r for r in la if r["ke_error"] <= eps]
+    if match:
+        best = min(match, key=lambda r: r["wall_s"])
+        print(f"lockgraph (KE error {lg['ke_error']:.3f}) in {lg['wall_s']:.1f} s; cheapest LAMMPS "
+              f"as accurate: {best['method']} in {best['wall_s']:.1f} s -> ratio "
+              f"{lg['wall_s'] / best['wall_s']:.2f} (target <= 0.2)")
+    else:
+        best = min(la, key=lambda r: r["ke_error"])
+        print(f"no LAMMPS run (reference aside) reaches lockgraph's KE error "
+              f"{lg['ke_error']:.3f}; its best, {best['method']}: {best['ke_error']:.3f} in "
+              f"{best['wall_s']:.1f} s; lockgraph {lg['wall_s']:.1f} s -> ratio "
+              f"{lg['wall_s'] / best['wall_s']:.2f} at lockgraph's better accuracy")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("matplotlib missing: no chart")
+        return
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for fam in dict.fromkeys(r["family"] for r in rows):
+        sel = [r for r in rows if r["family"] == fam]
+        ax.plot([max(r["ke_error"], 1e-4) for r in sel], [r["wall_s"] for r in sel], "o-",
+                label=fam)
+        for r in sel:
+            ax.annotate(r["method"].split(" ", 1)[1] if " " in r["method"] else "",
+                        (max(r["ke_error"], 1e-4), r["wall_s"]), fontsize=6)
+    ax.axvline(floor, color="grey", ls=":", label="noise floor")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("kinetic-energy error (fraction of the peak)")
+    ax.set_ylabel("wall time (s)")
+    ax.set_title(f"dish settling, N = {args.n}, {args.time:g} s")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    png = os.path.join(args.out, "dem_speed_accuracy.png")
+    fig.savefig(png + ".tmp.png", dpi=120)
+    os.replace(png + ".tmp.png", png)
+    print(f"wrote {path} and {png}")
+
+
+if __name__ == "__main__":
+    main()
