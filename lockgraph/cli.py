@@ -9,9 +9,10 @@
     lockgraph compare SCENE --against rebound [--state early|late] [--n N] [--orbits X]
                         [--seed S] [--seeds K] [--k K] [--dt-orbits X] [--json]
                         [--out FILE.json]
-    lockgraph compare dish --against lammps|liggghts [--n N] [--time T] [--seed S]
-                        [--seeds K] [--k K] [--stiffness E] [--dt-fraction F]
-                        [--ranks R] [--json] [--out FILE.json]
+    lockgraph compare dish|dish_marble --against lammps|liggghts [--n N] [--time T]
+                        [--seed S] [--seeds K] [--k K] [--heights H1,H2,..]
+                        [--stiffness E] [--dt-fraction F] [--ranks R] [--json]
+                        [--out FILE.json]
 
 Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
 could not continue (the state is left at the last completed step; nothing is saved),
@@ -137,8 +138,9 @@ def cmd_compare(args):
     if args.against not in AGAINST + DEM:
         raise InputError("against", f"unknown value {args.against!r}; one of "
                                     f"{', '.join(AGAINST + DEM)}")
-    if args.seeds < 2:
-        raise InputError("seeds", f"need at least 2 replicate seeds, got {args.seeds}")
+    least = 1 if args.scene == "dish_marble" else 2  # the others use the replicate scatter
+    if args.seeds < least:
+        raise InputError("seeds", f"need at least {least} replicate seeds, got {args.seeds}")
     progress = Progress(not args.quiet, f"compare {args.scene}")
     seeds = [args.seed + k for k in range(args.seeds)]
     params = scenarios.parse_overrides(args.param)
@@ -181,10 +183,49 @@ def _observable_table(res, name):
               f"{o['uncertainty']:12.3g} {zs}  {'yes' if o['agree'] else 'NO'}")
 
 
+def _compare_marble(args, seeds, params, progress):
+    from .marble_drop import compare_marble
+
+    heights = None
+    if args.heights:
+        try:
+            heights = tuple(float(x) for x in args.heights.split(","))
+        except ValueError:
+            raise InputError("heights", f"comma-separated drop heights in m, got "
+                                        f"{args.heights!r}") from None
+        if not all(h > 0 for h in heights):
+            raise InputError("heights", f"drop heights must be > 0 m, got {args.heights!r}")
+    res = compare_marble(args.scene, against=args.against, n=args.n, seeds=seeds,
+                         heights=heights, time=args.time or 0.15, stiffness=args.stiffness,
+                         dt_fraction=args.dt_fraction, params=params, ranks=args.ranks,
+                         progress=progress.message)
+    _write_report(args, res)
+    if args.json:
+        print(json.dumps(res, default=_jsonable))
+        return 0
+    name = "LAMMPS" if args.against == "lammps" else "LIGGGHTS"
+    print(f"{args.scene}: marble radius {res['marble']['marble_radius']:g} m into a bed of "
+          f"{res['n'] - 1} grains, seeds {res['seeds']}; {res['reference_settings']['code']}")
+    print(f"{'height m':>9s} {'depth lockgraph':>16s} {'depth ' + name:>16s} "
+          f"{'rest lockgraph':>15s} {'rest ' + name:>15s}  agree")
+    for o in res["per_height"]:
+        a, b = o["lockgraph"], o["reference"]
+        print(f"{o['height']:9.3g} {a['depth']:16.4g} {b['depth']:16.4g} {a['rest_time']:15.3g} "
+              f"{b['rest_time']:15.3g}  {'yes' if o['depth_agree'] and o['rest_agree'] else 'NO'}")
+    if res["uehara_exponent"]:
+        print(f"Uehara exponent of H (1/3): {res['uehara_exponent']}")
+    print(f"agree: {res['agree']}; wall: lockgraph {res['wall_s']['lockgraph']:.1f} s, {name} "
+          f"{res['wall_s']['reference']:.1f} s; {name} failures: {res['reference_failures']}")
+    return 0
+
+
 def _compare_dem(args, seeds, params, progress):
     from .compare_dish import compare_dish
 
-    res = compare_dish(args.scene, against=args.against, n=args.n, time=args.time, seeds=seeds,
+    if args.scene == "dish_marble":
+        return _compare_marble(args, seeds, params, progress)
+    res = compare_dish(args.scene, against=args.against, n=args.n, time=args.time or 0.5,
+                       seeds=seeds,
                        k=args.k, stiffness=args.stiffness, dt_fraction=args.dt_fraction,
                        params=params, ranks=args.ranks, progress=progress.message)
     _write_report(args, res)
@@ -256,13 +297,17 @@ def parser():
     r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     r.set_defaults(func=cmd_run)
     c = sub.add_parser("compare", help="compare a scene against a reference code")
-    c.add_argument("scene", help="ring or ring_moonlet (REBOUND); dish (LAMMPS, LIGGGHTS)")
+    c.add_argument("scene", help="ring or ring_moonlet (REBOUND); dish or dish_marble "
+                                 "(LAMMPS, LIGGGHTS)")
     c.add_argument("--against", required=True, help="rebound | lammps | liggghts")
     c.add_argument("--state", choices=("early", "late"), default="late",
                    help="ring state (late); the dish always starts from the falling block")
     c.add_argument("--n", type=int, help="particles (ring: 2000; dish: the scene's)")
-    c.add_argument("--time", type=float, default=0.5,
-                   help="dish: seconds to run from the falling block (0.5)")
+    c.add_argument("--time", type=float,
+                   help="dish: seconds to run from the falling block (0.5); dish_marble: "
+                        "seconds after the drop (0.15)")
+    c.add_argument("--heights", help="dish_marble: drop heights in m, comma-separated "
+                                     "(default: from the scene's marble_speed)")
     c.add_argument("--stiffness", type=float, default=1e7,
                    help="dish: DEM Young's modulus in Pa (1e7)")
     c.add_argument("--dt-fraction", type=float, default=20.0,

@@ -192,7 +192,7 @@ def _data_file(state, physics, path):
     return len(keys)
 
 
-def _lammps_deck(state, physics, contact, dt, steps, every, ntypes, ranks):
+def _lammps_deck(state, physics, contact, dt, steps, every, ntypes, ranks, track):
     e = physics.restitution.e
     if contact.model == "hertz":
         normal = f"hertz/material {_f(contact.stiffness)} {_f(e)} {_f(POISSON)}"
@@ -213,7 +213,7 @@ def _lammps_deck(state, physics, contact, dt, steps, every, ntypes, ranks):
               "pair_style granular", f"pair_coeff * * {model}"]
     lines += _lammps_walls(physics, model)
     # LAMMPS: 'format float'; LIGGGHTS 3.8 knows only a whole-line format
-    return _run_lines(lines, dt, steps, every, "float %.17g")
+    return _run_lines(lines, dt, steps, every, "float %.17g", track)
 
 
 def _lammps_walls(physics, model):
@@ -225,7 +225,7 @@ def _lammps_walls(physics, model):
             f"fix cylinder all wall/gran granular {model} zcylinder {_f(dom.radius)}"]
 
 
-def _liggghts_deck(state, physics, contact, dt, steps, every, ntypes, ranks):
+def _liggghts_deck(state, physics, contact, dt, steps, every, ntypes, ranks, track):
     e = physics.restitution.e
     skin = contact.skin * float(state.radius.min())
     _, _, _, boundary = _box(state, physics)
@@ -255,18 +255,25 @@ def _liggghts_deck(state, physics, contact, dt, steps, every, ntypes, ranks):
                   f"fix floor all {wall} zplane 0.0",
                   f"fix cylinder all {wall} zcylinder {_f(dom.radius)} 0.0 0.0"]
     return _run_lines(lines, dt, steps, every,
-                      "\"%d %.17g %.17g %.17g %.17g %.17g %.17g\"")
+                      "\"%d %.17g %.17g %.17g %.17g %.17g %.17g\"", track)
 
 
-def _run_lines(lines, dt, steps, every, dump_format):
+def _run_lines(lines, dt, steps, every, dump_format, track):
     """The deck's tail, the same for both codes: integrate, report lost atoms
-    without stopping (the harness counts them), dump every ``every`` steps."""
+    without stopping (the harness counts them), dump every ``every`` steps —
+    all particles, or only ``track`` (then all of them at the start and end)."""
     lines = lines + ["fix integrate all nve/sphere", f"timestep {_f(dt)}",
                      "thermo_style custom step atoms ke", f"thermo {max(1, every)}",
-                     "thermo_modify lost warn norm no",
-                     f"dump out all custom {every} out.dump id x y z vx vy vz",
-                     f"dump_modify out sort id format {dump_format}",
-                     f"run {steps}"]
+                     "thermo_modify lost warn norm no"]
+    group = "all"
+    if track is not None:
+        group = "tracked"
+        lines += ["group tracked id " + " ".join(str(int(i) + 1) for i in track),
+                  f"dump final all custom {steps} final.dump id x y z vx vy vz",
+                  f"dump_modify final sort id format {dump_format}"]
+    lines += [f"dump out {group} custom {every} out.dump id x y z vx vy vz",
+              f"dump_modify out sort id format {dump_format}",
+              f"run {steps}"]
     return "\n".join(lines) + "\n"
 
 
@@ -320,9 +327,12 @@ def command(code, ranks=1, threads=1):
 
 
 def run(state, physics, code, duration, contact=Contact(), samples=1, ranks=1, threads=1,
-        timeout=3600.0, dt=None, progress=None):
+        timeout=3600.0, dt=None, progress=None, track=None):
     """Run ``code`` ("lammps" or "liggghts") from ``state`` for ``duration`` s and
     return a DemResult with ``samples`` + 1 snapshots (the start included).
+    With ``track`` (particle indices) the snapshots between the first and the
+    last hold only those particles (the others are NaN): a marble followed
+    through a large bed.
 
     ``dt`` overrides the step chosen from the contact time (to probe a step that
     is too large).  Raises DemFailure when the code exits with an error or
@@ -348,7 +358,11 @@ def run(state, physics, code, duration, contact=Contact(), samples=1, ranks=1, t
     try:
         ntypes = _data_file(state, physics, os.path.join(work, "data.in"))
         writer = _lammps_deck if code == "lammps" else _liggghts_deck
-        deck = writer(state, physics, contact, step, steps, every, ntypes, ranks)
+        if track is not None:
+            track = np.unique(np.asarray(track, np.int64))
+            if track.size == 0 or track.min() < 0 or track.max() >= state.n:
+                raise InputError("track", f"particle indices must lie in 0..{state.n - 1}")
+        deck = writer(state, physics, contact, step, steps, every, ntypes, ranks, track)
         with open(os.path.join(work, "in.deck"), "w") as fh:
             fh.write(deck)
         env = dict(os.environ, OMP_NUM_THREADS=str(threads), OMP_WAIT_POLICY="passive")
@@ -370,6 +384,12 @@ def run(state, physics, code, duration, contact=Contact(), samples=1, ranks=1, t
             raise DemFailure(f"{code} exited with code {proc.returncode}: "
                              f"{err[0] if err else log}")
         dsteps, pos, vel = read_dump(dump, state.n)
+        if track is not None:
+            fsteps, fpos, fvel = read_dump(os.path.join(work, "final.dump"), state.n)
+            for k, st in enumerate(fsteps):  # the start and the end, complete
+                hit = np.flatnonzero(dsteps == st)
+                if hit.size:
+                    pos[hit[0]], vel[hit[0]] = fpos[k], fvel[k]
         loop = sum(float(m.group(1)) for m in _LOOP.finditer(out))
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -377,7 +397,7 @@ def run(state, physics, code, duration, contact=Contact(), samples=1, ranks=1, t
         pos = _unwrap(pos, state.pos, physics.domain.length)
     res = DemResult(code, version, state.time + dsteps * step, pos, vel, step, tc, steps,
                     wall, loop, {}, deck, log)
-    res.failures = failures(res, state, physics)
+    res.failures = failures(res, state, physics, complete=track is None)
     return res
 
 
@@ -403,8 +423,10 @@ def mechanical_energy(pos, vel, mass, g):
     return ke + pe
 
 
-def failures(res, state, physics):
-    """What went physically wrong in a finished DEM run (dict; empty if nothing)."""
+def failures(res, state, physics, complete=True):
+    """What went physically wrong in a finished DEM run (dict; empty if nothing).
+    ``complete``: every snapshot holds every particle (else only the first and
+    the last are used for the energy balance)."""
     from .overlaps import max_overlap
     from .state import State
 
@@ -412,7 +434,8 @@ def failures(res, state, physics):
     lost = int(np.sum(~np.isfinite(res.pos[-1]).all(axis=1)))
     if lost:
         out["lost_particles"] = lost
-    energy = mechanical_energy(res.pos, res.vel, state.mass, physics.g)
+    pick = slice(None) if complete else [0, -1]
+    energy = mechanical_energy(res.pos[pick], res.vel[pick], state.mass, physics.g)
     floor = float(physics.g * np.sum(state.mass * state.radius))  # all grains on the floor
     scale = max(energy[0] - floor, 1e-300)
     gain = float(np.nanmax(energy - energy[0]) / scale) if np.isfinite(energy).any() else math.inf
