@@ -28,7 +28,6 @@ method, wall time, errors, and lockgraph's time as a fraction of LAMMPS's at
 matched accuracy (target <= 1/5).
 """
 import argparse
-import csv
 import math
 import os
 import sys
@@ -39,6 +38,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
+from benchmarks.common import write_csv  # noqa: E402
 from lockgraph import dem, scenarios  # noqa: E402
 from lockgraph import dish_observables as DO  # noqa: E402
 from lockgraph.compare_dish import run_dem, run_lockgraph  # noqa: E402
@@ -123,11 +123,7 @@ def main():
                      "settle_error": abs(r["settle"] - ref["settle"]),
                      "reference": label == ref_label[0]})
     path = os.path.join(args.out, "dem_speed_accuracy.csv")
-    with open(path + ".tmp", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(path + ".tmp", path)
+    write_csv(rows, path)
     print(f"N = {args.n}, {args.time:g} s of settling, {args.seeds} seeds; reference "
           f"{ref_label[0]}; kinetic-energy noise floor {floor:.3f}")
     print(f"{'method':34s} {'wall s':>8s} {'KE error':>9s} {'settle s':>9s} {'settle err':>10s}")
@@ -141,25 +137,17 @@ def main():
     for lg in (r for r in rows if r["family"] == "lockgraph"):
         eps = max(lg["ke_error"], floor)
         match = [r for r in la if r["ke_error"] <= eps]
-        if match and lg["ke_error"] > 2 * max(r["ke_error"] for r in la):
-            best = min(la, key=lambda r: r["wall_s"])
-            print(f"{lg['method']} (KE error {lg['ke_error']:.3f}, {lg['wall_s']:.1f} s): less "
-                  f"accurate than every LAMMPS run; its cheapest, {best['method']} "
-                  f"({best['ke_error']:.3f}, {best['wall_s']:.1f} s), gives ratio "
-                  f"{lg['wall_s'] / best['wall_s']:.2f} — not a match (a softer LAMMPS run "
-                  f"would be cheaper still)")
-        elif match:
-            best = min(match, key=lambda r: r["wall_s"])
-            print(f"{lg['method']} (KE error {lg['ke_error']:.3f}, {lg['wall_s']:.1f} s): cheapest "
-                  f"LAMMPS as accurate {best['method']} ({best['ke_error']:.3f}, "
-                  f"{best['wall_s']:.1f} s) -> ratio {lg['wall_s'] / best['wall_s']:.2f} "
-                  f"(target <= 0.2)")
-        else:
-            best = min(la, key=lambda r: r["ke_error"])
-            print(f"{lg['method']} (KE error {lg['ke_error']:.3f}, {lg['wall_s']:.1f} s): no LAMMPS "
-                  f"run as accurate; its best {best['method']} ({best['ke_error']:.3f}, "
-                  f"{best['wall_s']:.1f} s) -> ratio {lg['wall_s'] / best['wall_s']:.2f} at "
-                  f"lockgraph's better accuracy")
+        worse = lg["ke_error"] > 2 * max(r["ke_error"] for r in la)
+        best = (min(la, key=lambda r: r["wall_s"]) if worse
+                else min(match, key=lambda r: r["wall_s"]) if match
+                else min(la, key=lambda r: r["ke_error"]))
+        verdict = ("less accurate than every LAMMPS run: not a match (a softer LAMMPS run "
+                   "would be cheaper still)" if worse
+                   else "cheapest LAMMPS run as accurate (target <= 0.2)" if match
+                   else "no LAMMPS run as accurate: LAMMPS's best, at lockgraph's better accuracy")
+        print(f"{lg['method']} (KE error {lg['ke_error']:.3f}, {lg['wall_s']:.1f} s) vs "
+              f"{best['method']} ({best['ke_error']:.3f}, {best['wall_s']:.1f} s): ratio "
+              f"{lg['wall_s'] / best['wall_s']:.2f}; {verdict}")
     try:
         import matplotlib
         matplotlib.use("Agg")

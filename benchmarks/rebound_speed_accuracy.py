@@ -21,7 +21,6 @@ series per code) and prints, per N, REBOUND's best error and wall time, the
 wall time lockgraph needs to reach that error, and their ratio (target <= 1/5).
 """
 import argparse
-import csv
 import math
 import os
 import sys
@@ -30,6 +29,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
+from benchmarks.common import write_csv  # noqa: E402
 from lockgraph import scenarios  # noqa: E402
 from lockgraph.compare import sampled, state_arrays  # noqa: E402
 from lockgraph.rebound_ring import ReboundRing  # noqa: E402
@@ -123,11 +123,7 @@ def main():
         fast = min(ok, key=lambda x: x["wall_s"]) if ok else None
         summary.append((n, best, fast, noise))
     path = os.path.join(args.out, "rebound_speed_accuracy.csv")
-    with open(path + ".tmp", "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(path + ".tmp", path)
+    write_csv(rows, path)
     chart(rows, os.path.join(args.out, "rebound_speed_accuracy.png"))
     print(f"\n{'N':>6s} {'code':10s} {'setting':18s} {'wall s':>8s} {'collisions':>10s} "
           f"{'error':>8s} {'max overlap':>12s}")
