@@ -4,10 +4,11 @@
 #   ./dev.sh report   the main job: compare the default scene (ring) with REBOUND,
 #                     print the table and write out/ring_compare.json
 #   ./dev.sh test     set up, then run the test and validation suites
-#   ./dev.sh bench [throughput|parallel|tables|rebound|dem] [ARGS]
+#   ./dev.sh bench [throughput|parallel|tables|rebound|dem|marble] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
 #                     2-thread speedup, the paper's tables by replay, or speed
 #                     against accuracy versus REBOUND or LAMMPS/LIGGGHTS
+#                     (settling dish; marble stop)
 #   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS
 #
 # Set-up is idempotent: a virtualenv in .venv (or $LOCKGRAPH_VENV) with the
@@ -73,13 +74,14 @@ case "$cmd" in
     bench)
         setup_python
         which="throughput"
-        case "${1:-}" in throughput|parallel|tables|rebound|dem) which="$1"; shift ;; esac
+        case "${1:-}" in throughput|parallel|tables|rebound|dem|marble) which="$1"; shift ;; esac
         case "$which" in
             throughput) exec "$PY" benchmarks/throughput.py "$@" ;;
             parallel) exec "$PY" benchmarks/parallel_speedup.py "$@" ;;
             tables) exec "$PY" benchmarks/paper_tables.py "$@" ;;
             rebound) exec "$PY" benchmarks/rebound_speed_accuracy.py "$@" ;;
             dem) exec "$PY" benchmarks/dem_speed_accuracy.py "$@" ;;
+            marble) exec "$PY" benchmarks/marble_speed_accuracy.py "$@" ;;
         esac ;;
     *)
         sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'
