@@ -38,7 +38,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.common import write_csv  # noqa: E402
+from benchmarks.common import chart, write_csv  # noqa: E402
 from lockgraph import dem, scenarios  # noqa: E402
 from lockgraph import dish_observables as DO  # noqa: E402
 from lockgraph.compare_dish import run_dem, run_lockgraph  # noqa: E402
@@ -148,33 +148,10 @@ def main():
         print(f"{lg['method']} (KE error {lg['ke_error']:.3f}, {lg['wall_s']:.1f} s) vs "
               f"{best['method']} ({best['ke_error']:.3f}, {best['wall_s']:.1f} s): ratio "
               f"{lg['wall_s'] / best['wall_s']:.2f}; {verdict}")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib missing: no chart")
-        return
-    fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    for fam in dict.fromkeys(r["family"] for r in rows):
-        sel = [r for r in rows if r["family"] == fam]
-        ax.plot([max(r["ke_error"], 1e-4) for r in sel], [r["wall_s"] for r in sel], "o-",
-                label=fam)
-        for r in sel:
-            ax.annotate(r["method"].split(" ", 1)[1] if " " in r["method"] else "",
-                        (max(r["ke_error"], 1e-4), r["wall_s"]), fontsize=6)
-    ax.axvline(floor, color="grey", ls=":", label="noise floor")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("kinetic-energy error (fraction of the peak)")
-    ax.set_ylabel("wall time (s)")
-    ax.set_title(f"dish settling, N = {args.n}, {args.time:g} s")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
     png = os.path.join(args.out, "dem_speed_accuracy.png")
-    fig.savefig(png + ".tmp.png", dpi=120)
-    os.replace(png + ".tmp.png", png)
-    print(f"wrote {path} and {png}")
+    if chart(rows, "ke_error", "kinetic-energy error (fraction of the peak)",
+             f"dish settling, N = {args.n}, {args.time:g} s", png, floor=floor):
+        print(f"wrote {path} and {png}")
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.common import write_csv  # noqa: E402
+from benchmarks.common import chart, write_csv  # noqa: E402
 from benchmarks.dem_speed_accuracy import methods, say  # noqa: E402
 from lockgraph import dem  # noqa: E402
 from lockgraph import marble_drop as M  # noqa: E402
@@ -91,29 +91,10 @@ def main():
     for r in rows:
         print(f"{r['method']:34s} {r['wall_s']:8.1f} {r['depth_m'] * 1e3:9.3f} "
               f"{r['depth_error_d']:7.3f} {r['rest_s']:7.3f} {r['rest_error_s']:7.3f}")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        print("matplotlib missing: no chart")
-        return
-    fig, ax = plt.subplots(figsize=(6.5, 4.5))
-    for fam in dict.fromkeys(r["family"] for r in rows):
-        sel = [r for r in rows if r["family"] == fam]
-        ax.plot([max(r["depth_error_d"], 1e-3) for r in sel], [r["wall_s"] for r in sel], "o-",
-                label=fam)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("penetration depth error (grain diameters)")
-    ax.set_ylabel("wall time (s)")
-    ax.set_title(f"marble from {args.height:g} m, {N} grains")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
     png = os.path.join(args.out, "marble_speed_accuracy.png")
-    fig.savefig(png + ".tmp.png", dpi=120)
-    os.replace(png + ".tmp.png", png)
-    print(f"wrote {path} and {png}")
+    if chart(rows, "depth_error_d", "penetration depth error (grain diameters)",
+             f"marble from {args.height:g} m, {N} grains", png, smallest=1e-3):
+        print(f"wrote {path} and {png}")
 
 
 if __name__ == "__main__":
