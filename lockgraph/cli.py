@@ -184,6 +184,7 @@ def _observable_table(res, name):
 
 
 def _compare_marble(args, seeds, params, progress):
+    from . import dem
     from .marble_drop import compare_marble
 
     heights = None
@@ -203,7 +204,7 @@ def _compare_marble(args, seeds, params, progress):
     if args.json:
         print(json.dumps(res, default=_jsonable))
         return 0
-    name = "LAMMPS" if args.against == "lammps" else "LIGGGHTS"
+    name = dem.NAMES[args.against]
     print(f"{args.scene}: marble radius {res['marble']['marble_radius']:g} m into a bed of "
           f"{res['n'] - 1} grains, seeds {res['seeds']}; {res['reference_settings']['code']}")
     print(f"{'height m':>9s} {'depth lockgraph':>16s} {'depth ' + name:>16s} "
@@ -220,6 +221,7 @@ def _compare_marble(args, seeds, params, progress):
 
 
 def _compare_dem(args, seeds, params, progress):
+    from . import dem
     from .compare_dish import compare_dish
 
     if args.scene == "dish_marble":
@@ -232,7 +234,7 @@ def _compare_dem(args, seeds, params, progress):
     if args.json:
         print(json.dumps(res, default=_jsonable))
         return 0
-    name = "LAMMPS" if args.against == "lammps" else "LIGGGHTS"
+    name = dem.NAMES[args.against]
     rs = res["reference_settings"]
     print(f"{args.scene}, N = {res['n']}, {res['time']:g} s from the falling block, seeds "
           f"{res['seeds']}; {rs['code']}: Hertz E = {rs['stiffness']:g} Pa, dt = "

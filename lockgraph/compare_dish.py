@@ -52,19 +52,18 @@ def _grains(radius):
     return radius <= radius.min() * (1.0 + 1e-9)
 
 
-def observables(times, pos, vel, radius, cylinder_radius):
-    """The compared observables of one run from its sampled states (k, n, 3)."""
+def measure(times, pos, vel, radius, cylinder_radius, floor_load):
+    """(compared observables, other reported figures) of one run from its
+    sampled states (k, n, 3): the static observables of the last state; the
+    floor load (fraction of the weight), the settling time (s) and the
+    layering profiles."""
     g = _grains(radius)
-    return DO.snapshot(pos[-1][g], radius[g], cylinder_radius)
-
-
-def extras(times, pos, vel, radius, cylinder_radius, floor_load):
-    """What a run reports besides the compared observables: the floor load
-    (fraction of the weight), the settling time (s) and the layering profiles."""
-    g = _grains(radius)
-    lay = DO.layering(pos[-1][g], radius[g], cylinder_radius)
-    return {"floor_load": floor_load, "settle_time": DO.settle_time(times, vel[:, g]),
-            "layering": {key: [float(x) for x in val] for key, val in lay.items()}}
+    last, rad = pos[-1][g], radius[g]
+    obs = DO.snapshot(last, rad, cylinder_radius)
+    reg = DO.bulk_region(last, rad, cylinder_radius, obs["bed_height"])
+    lay = DO.layering(last, rad, cylinder_radius, region=reg)
+    return obs, {"floor_load": floor_load, "settle_time": DO.settle_time(times, vel[:, g]),
+                 "layering": {key: [float(x) for x in val] for key, val in lay.items()}}
 
 
 def run_lockgraph(sc, duration, threads=1):
@@ -105,24 +104,12 @@ def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
     weight = float(mass.sum() * sc.physics.g)
     load = DO.floor_load_from_momentum(res.times[-1 - k], res.times[-1], pz[-1 - k], pz[-1],
                                        weight)
-    g = _grains(sc.state.radius)
-    last = res.pos[-1][g]
     info = {"wall_s": res.wall_s, "loop_s": res.loop_s, "steps": res.steps, "dt": res.dt,
             "contact_time": res.contact_time, "version": res.version,
             "failures": res.failures,
             # how far the soft contacts overlap at the end (fraction of a diameter)
-            "max_overlap": _max_overlap(last, sc.state.radius[g], sc.physics.domain)}
+            "max_overlap": res.max_overlap}
     return res.times, res.pos, res.vel, load, info
-
-
-def _max_overlap(pos, radius, domain):
-    from .overlaps import max_overlap
-    from .state import State
-    ok = np.isfinite(pos).all(axis=1)
-    if ok.sum() < 2:
-        return math.nan
-    st = State(pos[ok], np.zeros((int(ok.sum()), 3)), radius[ok], np.ones(int(ok.sum())))
-    return float(max_overlap(st, domain)[0])
 
 
 def compare_dish(scene="dish", against="lammps", n=None, time=0.5, seeds=(1, 2, 3), k=3.0,
@@ -152,7 +139,7 @@ def compare_dish(scene="dish", against="lammps", n=None, time=0.5, seeds=(1, 2, 
     say = progress or (lambda msg: None)
     cache = {} if cache is None else cache
     per_a, per_b, runs = {}, {}, []
-    name = "LAMMPS" if against == "lammps" else "LIGGGHTS"
+    name = dem.NAMES[against]
     for seed in seeds:
         sc = scenarios.load(scene, "early", n=n, seed=seed, params=params)
         rc = sc.physics.domain.radius
@@ -160,13 +147,11 @@ def compare_dish(scene="dish", against="lammps", n=None, time=0.5, seeds=(1, 2, 
         if key not in cache:
             say(f"seed {seed}: lockgraph, {sc.state.n} grains, {time:g} s")
             t, p, v, load, ia = run_lockgraph(sc, time, threads)
-            cache[key] = (observables(t, p, v, sc.state.radius, rc),
-                          extras(t, p, v, sc.state.radius, rc, load), ia)
+            cache[key] = (*measure(t, p, v, sc.state.radius, rc, load), ia)
         a, xa, ia = cache[key]
         say(f"seed {seed}: {name}")
         t, p, v, load, ib = run_dem(sc, against, time, contact, ranks, 1, say)
-        b = observables(t, p, v, sc.state.radius, rc)
-        xb = extras(t, p, v, sc.state.radius, rc, load)
+        b, xb = measure(t, p, v, sc.state.radius, rc, load)
         say(f"seed {seed}: lockgraph {ia['wall_s']:.1f} s, {ia['collisions']} collisions; "
             f"{name} {ib['wall_s']:.1f} s, {ib['steps']} steps")
         for key in a:

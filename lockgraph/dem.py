@@ -31,6 +31,7 @@ from .reference_codes import lammps_binary, liggghts_binary, mpirun
 from .restitution import Constant
 
 CODES = ("lammps", "liggghts")
+NAMES = {"lammps": "LAMMPS", "liggghts": "LIGGGHTS"}  # for people
 MODELS = {"lammps": ("hertz", "hooke"), "liggghts": ("hertz",)}
 POISSON = 0.3
 # LIGGGHTS refuses E > 1e9 Pa unless told its particles are hard
@@ -126,6 +127,7 @@ class DemResult:
     failures: dict = field(default_factory=dict)
     deck: str = ""
     log: str = ""
+    max_overlap: float = math.nan
 
 
 def _f(x):
@@ -423,13 +425,24 @@ def mechanical_energy(pos, vel, mass, g):
     return ke + pe
 
 
-def failures(res, state, physics, complete=True):
-    """What went physically wrong in a finished DEM run (dict; empty if nothing).
-    ``complete``: every snapshot holds every particle (else only the first and
-    the last are used for the energy balance)."""
+def overlap_of(pos, radius, domain):
+    """Largest pair overlap (fraction of the contact distance) among the
+    particles with finite positions (NaN with fewer than two)."""
     from .overlaps import max_overlap
     from .state import State
 
+    ok = np.isfinite(pos).all(axis=1)
+    m = int(ok.sum())
+    if m < 2:
+        return math.nan
+    return float(max_overlap(State(pos[ok], np.zeros((m, 3)), radius[ok], np.ones(m)),
+                             domain)[0])
+
+
+def failures(res, state, physics, complete=True):
+    """What went physically wrong in a finished DEM run (dict; empty if nothing).
+    ``complete``: every snapshot holds every particle (else only the first and
+    the last are used for the energy balance).  Sets ``res.max_overlap``."""
     out = {}
     lost = int(np.sum(~np.isfinite(res.pos[-1]).all(axis=1)))
     if lost:
@@ -443,12 +456,9 @@ def failures(res, state, physics, complete=True):
         out["energy_gain"] = gain
     last = res.pos[-1]
     ok = np.isfinite(last).all(axis=1)
-    if ok.sum() >= 2:
-        st = State(last[ok], np.nan_to_num(res.vel[-1][ok]), state.radius[ok], state.mass[ok])
-        worst = max_overlap(st, physics.domain)[0]
-        out_overlap = float(worst)
-        if out_overlap > DEEP_OVERLAP:
-            out["deep_overlap"] = out_overlap
+    res.max_overlap = overlap_of(last, state.radius, physics.domain)
+    if res.max_overlap > DEEP_OVERLAP:
+        out["deep_overlap"] = res.max_overlap
     if isinstance(physics.domain, Dish) and ok.any():
         rho = np.hypot(last[ok, 0], last[ok, 1]) + state.radius[ok]
         escaped = int(np.sum((rho > physics.domain.radius + state.radius[ok])

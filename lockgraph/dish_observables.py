@@ -31,12 +31,11 @@ BULK_MARGIN = 2.0
 LAYER_SLACK = 0.1
 
 
-def _slab_volume(z, r, lo, hi):
-    """Volume (m^3) of each sphere (centre height z, radius r) between lo and hi."""
-    a = np.clip(lo - z, -r, r)
-    b = np.clip(hi - z, -r, r)
-    # integral of pi (r^2 - u^2) du from a to b
-    return np.pi * (r * r * (b - a) - (b ** 3 - a ** 3) / 3.0)
+_FIND = object()  # "find the bulk region": a region argument not given
+
+
+def _region(pos, radius, cylinder_radius, region):
+    return bulk_region(pos, radius, cylinder_radius) if region is _FIND else region
 
 
 # Gauss-Legendre nodes for the integral over height of a sphere's horizontal
@@ -102,11 +101,11 @@ def bed_height(pos, radius, cylinder_radius):
     return float(z[k] + (z[k + 1] - z[k]) * f0 / (f0 - f1))
 
 
-def bulk_region(pos, radius, cylinder_radius):
+def bulk_region(pos, radius, cylinder_radius, height=None):
     """(sampling radius, z low, z high) of the bulk sample, or None when the bed
-    is too shallow or narrow to have one."""
+    is too shallow or narrow to have one; ``height``: the bed height if known."""
     d = 2.0 * float(np.median(radius))
-    h = bed_height(pos, radius, cylinder_radius)
+    h = bed_height(pos, radius, cylinder_radius) if height is None else height
     rs = cylinder_radius - BULK_MARGIN * d
     lo, hi = BULK_MARGIN * d, h - BULK_MARGIN * d
     if rs <= d or hi - lo <= d:
@@ -114,11 +113,11 @@ def bulk_region(pos, radius, cylinder_radius):
     return rs, lo, hi
 
 
-def packing_fraction(pos, radius, cylinder_radius):
+def packing_fraction(pos, radius, cylinder_radius, region=_FIND):
     """Bulk packing fraction: grain volume inside the sampled cylinder (the
     margins away from floor, surface and wall) per its volume; NaN without a
-    bulk."""
-    reg = bulk_region(pos, radius, cylinder_radius)
+    bulk.  ``region``: the ``bulk_region`` if already found."""
+    reg = _region(pos, radius, cylinder_radius, region)
     if reg is None:
         return math.nan
     rs, lo, hi = reg
@@ -132,10 +131,11 @@ def floor_coverage(pos, radius, cylinder_radius):
     return float(np.sum(np.pi * radius[touch] ** 2) / (math.pi * cylinder_radius ** 2))
 
 
-def wall_coverage(pos, radius, cylinder_radius):
+def wall_coverage(pos, radius, cylinder_radius, region=_FIND):
     """Fraction of the cylinder wall, over the bulk's height range, covered by
-    the cross-sections of grains touching it; NaN without a bulk."""
-    reg = bulk_region(pos, radius, cylinder_radius)
+    the cross-sections of grains touching it; NaN without a bulk.  ``region``:
+    the ``bulk_region`` if already found."""
+    reg = _region(pos, radius, cylinder_radius, region)
     if reg is None:
         return math.nan
     _, lo, hi = reg
@@ -145,18 +145,19 @@ def wall_coverage(pos, radius, cylinder_radius):
     return float(np.sum(np.pi * radius[touch] ** 2) / (2 * math.pi * cylinder_radius * (hi - lo)))
 
 
-def layering(pos, radius, cylinder_radius, depth=4.0, bins=80):
+def layering(pos, radius, cylinder_radius, depth=4.0, bins=80, region=_FIND):
     """Packing-fraction profiles near the floor and the wall.
 
     Returns dict: ``z`` (bins,) m and ``phi_z`` over the whole cross-section
     for 0 < z < depth grain diameters; ``rho`` (bins,) m and ``phi_rho`` in
-    annuli within ``depth`` diameters of the wall, over the bulk's heights.
+    annuli within ``depth`` diameters of the wall, over the bulk's heights
+    (``region``: the ``bulk_region`` if already found).
     """
     d = 2.0 * float(np.median(radius))
     z = np.linspace(0.0, depth * d, bins)
     phi_z = profile_z(pos, radius, math.pi * cylinder_radius ** 2, z)
     out = {"z": z, "phi_z": phi_z}
-    reg = bulk_region(pos, radius, cylinder_radius)
+    reg = _region(pos, radius, cylinder_radius, region)
     edges = np.linspace(cylinder_radius - depth * d, cylinder_radius, bins + 1)
     rho = np.hypot(pos[:, 0], pos[:, 1])
     if reg is None:
@@ -173,11 +174,13 @@ def layering(pos, radius, cylinder_radius, depth=4.0, bins=80):
 
 def snapshot(pos, radius, cylinder_radius):
     """The static observables of one settled state (dict)."""
+    h = bed_height(pos, radius, cylinder_radius)
+    reg = bulk_region(pos, radius, cylinder_radius, h)
     return {
-        "bed_height": bed_height(pos, radius, cylinder_radius),
-        "packing_fraction": packing_fraction(pos, radius, cylinder_radius),
+        "bed_height": h,
+        "packing_fraction": packing_fraction(pos, radius, cylinder_radius, reg),
         "floor_coverage": floor_coverage(pos, radius, cylinder_radius),
-        "wall_coverage": wall_coverage(pos, radius, cylinder_radius),
+        "wall_coverage": wall_coverage(pos, radius, cylinder_radius, reg),
     }
 
 

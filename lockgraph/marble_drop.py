@@ -23,7 +23,7 @@ import numpy as np
 from . import dem
 from . import dish_observables as DO
 from . import scenarios
-from .errors import ScenarioError
+from .errors import InputError, ScenarioError
 from .simulation import Simulation
 from .state import State
 
@@ -99,9 +99,7 @@ def settled_bed(n, seed=1, params=None, code="lammps", stiffness=1e7, time=None,
 def _worst_overlap(pos, rad, dish):
     """Largest overlap as a fraction of the radius (pairs: of the contact
     distance) with another grain, the floor or the cylinder."""
-    from .overlaps import max_overlap
-    st = State(pos, np.zeros_like(pos), rad, np.ones(len(rad)))
-    pair = max_overlap(st, dish)[0]
+    pair = dem.overlap_of(pos, rad, dish)
     floor = float(np.max((rad - pos[:, 2]) / rad))
     wall = float(np.max((np.hypot(pos[:, 0], pos[:, 1]) + rad - dish.radius) / rad))
     return max(pair, floor, wall, 0.0)
@@ -207,16 +205,13 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
     grain diameters and the mean times to rest within ``rest_tol`` s (see
     validation/test_dem_marble.py for the measured spreads behind the defaults).
     Returns the report dict (the shape of the other comparisons)."""
-    from .errors import InputError
-
     if scene != "dish_marble":
         raise InputError("scene", f"the marble comparison runs on dish_marble, got {scene!r}")
     if against not in dem.CODES:
         raise InputError("against", f"unknown DEM code {against!r}; one of {', '.join(dem.CODES)}")
     seeds = [int(s) for s in seeds]
     say = progress or (lambda msg: None)
-    base = scenarios.load(scene, "early", n=n, seed=seeds[0], params=params)
-    p = base.params
+    p = scenarios.resolve_params(scenarios.read(scene), n, seeds[0], None, params)
     bed_params = {k: v for k, v in (params or {}).items() if k not in MARBLE_KEYS}
     if heights is None:
         heights = (p["marble_speed"] ** 2 / (2.0 * p["g"]),)
