@@ -1,19 +1,21 @@
 #!/usr/bin/env bash
 # lockgraph developer entry point: sets everything up on first use.
 #
-#   ./dev.sh report   the main job: compare the default scene (ring) with REBOUND,
-#                     print the table and write out/ring_compare.json
+#   ./dev.sh report   the main job: the scenario comparison report (quick
+#                     campaign, under 10 minutes) in report/index.html; ARGS go to
+#                     'lockgraph report' (e.g. --full, --scenes ring, --out DIR)
 #   ./dev.sh test     set up, then run the test and validation suites
 #   ./dev.sh bench [throughput|parallel|tables|rebound|dem|marble] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
 #                     2-thread speedup, the paper's tables by replay, or speed
 #                     against accuracy versus REBOUND or LAMMPS/LIGGGHTS
 #                     (settling dish; marble stop)
-#   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS
+#   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS, chromium
 #
 # Set-up is idempotent: a virtualenv in .venv (or $LOCKGRAPH_VENV) with the
-# package and its validation extra (REBOUND, LAMMPS, ASE, matplotlib, pytest,
-# hypothesis), and LIGGGHTS 3.8 from Debian (installed with apt-get when missing).
+# package and its validation extra (REBOUND, LAMMPS, ASE, matplotlib, Dask,
+# pytest, hypothesis), and from Debian LIGGGHTS 3.8 and chromium (installed with
+# apt-get when missing).
 set -euo pipefail
 cd "$(dirname "$0")"
 VENV="${LOCKGRAPH_VENV:-.venv}"
@@ -26,7 +28,7 @@ setup_python() {
         say "creating the virtualenv $VENV"
         python3 -m venv "$VENV"
     fi
-    if ! "$PY" -c "import lockgraph, numba, rebound, lammps, ase, matplotlib, pytest, hypothesis" 2>/dev/null \
+    if ! "$PY" -c "import lockgraph, numba, rebound, lammps, ase, matplotlib, distributed, pytest, hypothesis" 2>/dev/null \
        || [ pyproject.toml -nt "$VENV/.installed" ]; then
         say "installing lockgraph[validation] into $VENV"
         "$PY" -m pip install --quiet --upgrade pip
@@ -35,27 +37,31 @@ setup_python() {
     fi
 }
 
-setup_liggghts() {
-    if command -v liggghts >/dev/null 2>&1 || [ -x /usr/bin/liggghts ]; then
+setup_debian() {
+    # LIGGGHTS (a reference code) and chromium (screenshots of the report in the tests)
+    local missing=""
+    command -v liggghts >/dev/null 2>&1 || [ -x /usr/bin/liggghts ] || missing="liggghts"
+    command -v chromium >/dev/null 2>&1 || missing="$missing chromium"
+    if [ -z "$missing" ]; then
         return
     fi
     local sudo=""
     if [ "$(id -u)" != 0 ]; then
         if command -v sudo >/dev/null 2>&1; then sudo="sudo"; else
-            say "LIGGGHTS is missing and this is not root: install it with"
-            say "  apt-get update && apt-get install -y --no-install-recommends liggghts"
+            say "$missing missing and this is not root: install with"
+            say "  apt-get update && apt-get install -y --no-install-recommends $missing"
             return
         fi
     fi
-    say "installing LIGGGHTS 3.8 (Debian package liggghts)"
+    say "installing the Debian packages:$missing"
     $sudo apt-get update -q >/dev/null
-    # --no-install-recommends: without it apt pulls in ParaView
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends liggghts >/dev/null
+    # --no-install-recommends: without it apt pulls in ParaView with LIGGGHTS
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends $missing >/dev/null
 }
 
 setup() {
     setup_python
-    setup_liggghts
+    setup_debian
 }
 
 cmd="${1:-help}"
@@ -67,10 +73,9 @@ case "$cmd" in
         setup
         exec "$PY" -m pytest tests validation "$@" ;;
     report)
-        setup_python
-        mkdir -p out
-        say "comparing the default scene (ring, late state) with REBOUND: 3 seeds x 2 orbits"
-        exec "$VENV/bin/lockgraph" compare ring --against rebound --out out/ring_compare.json "$@" ;;
+        setup
+        say "the comparison report: quick campaign (lockgraph, REBOUND, LAMMPS, LIGGGHTS)"
+        exec "$VENV/bin/lockgraph" report --out report "$@" ;;
     bench)
         setup_python
         which="throughput"
@@ -84,6 +89,6 @@ case "$cmd" in
             marble) exec "$PY" benchmarks/marble_speed_accuracy.py "$@" ;;
         esac ;;
     *)
-        sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
         [ "$cmd" = help ] || exit 2 ;;
 esac

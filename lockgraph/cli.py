@@ -13,10 +13,12 @@
                         [--seed S] [--seeds K] [--k K] [--heights H1,H2,..]
                         [--stiffness E] [--dt-fraction F] [--ranks R] [--json]
                         [--out FILE.json]
+    lockgraph report [--scenes ring,ring_moonlet,dish,dish_marble] [--quick | --full | --smoke]
+                     [--out DIR] [--cache DIR] [--scheduler ADDRESS] [--no-pictures]
 
-Exit codes: 0 success, 2 bad input (the message names the field), 3 the run
-could not continue (the state is left at the last completed step; nothing is saved),
-4 a reference code is not installed (the message says how to install it).
+Exit codes: 0 success, 1 some runs of a report failed (listed in it), 2 bad input
+(the message names the field), 3 the run could not continue (the state is left at
+the last completed step; nothing is saved), 4 a reference code is not installed (the message says how to install it).
 """
 import argparse
 import json
@@ -273,6 +275,24 @@ def _jsonable(v):
     raise TypeError(f"not JSON serialisable: {v!r}")
 
 
+SCENE_NAMES = ("ring", "ring_moonlet", "dish", "dish_marble")
+
+
+def cmd_report(args):
+    from .report import build
+
+    scenes = [x for x in args.scenes.split(",") if x]
+    t0 = time.perf_counter()
+    print(f"lockgraph report: {args.mode} campaign over {', '.join(scenes)} into {args.out}/",
+          file=sys.stderr, flush=True)
+    out = build(args.out, args.mode, scenes, args.scheduler, args.cache,
+                pictures=not args.no_pictures)
+    print(f"lockgraph report: wrote {out['index']} ({out['runs']} runs, {out['cached']} from "
+          f"the cache, {out['failed']} failed) in {time.perf_counter() - t0:.0f} s",
+          file=sys.stderr)
+    return 1 if out["failed"] else 0
+
+
 def parser():
     p = argparse.ArgumentParser(prog="lockgraph", description="Hard-sphere collisions in time "
                                 "order, sequential or in parallel threads under lock-graph locks.")
@@ -327,6 +347,24 @@ def parser():
     c.add_argument("--out", metavar="FILE.json", help="also write the JSON report to FILE")
     c.add_argument("--quiet", action="store_true", help="no progress on stderr")
     c.set_defaults(func=cmd_compare)
+    rp = sub.add_parser("report", help="run a campaign and write the HTML comparison report")
+    rp.add_argument("--scenes", default=",".join(SCENE_NAMES),
+                    help=f"comma-separated subset of {','.join(SCENE_NAMES)} (all)")
+    mode = rp.add_mutually_exclusive_group()
+    mode.add_argument("--quick", dest="mode", action="store_const", const="quick",
+                      help="small systems, under 10 minutes on 2 cores (the default)")
+    mode.add_argument("--full", dest="mode", action="store_const", const="full",
+                      help="paper scale (~200,000 particles in the tables): hours")
+    mode.add_argument("--smoke", dest="mode", action="store_const", const="smoke",
+                      help="tiny systems, every table and chart (about a minute; for tests)")
+    rp.add_argument("--out", default="report", help="output directory (report)")
+    rp.add_argument("--cache", help="cache of finished runs (OUT/cache)")
+    rp.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on a Dask distributed cluster: 'local' starts one here, else "
+                         "the scheduler's address (tcp://host:8786); default: one after "
+                         "another in this process")
+    rp.add_argument("--no-pictures", action="store_true", help="leave out the scene pictures")
+    rp.set_defaults(func=cmd_report, mode="quick")
     return p
 
 

@@ -66,15 +66,18 @@ def measure(times, pos, vel, radius, cylinder_radius, floor_load):
                  "layering": {key: [float(x) for x in val] for key, val in lay.items()}}
 
 
-def run_lockgraph(sc, duration, threads=1):
-    """Sampled states of a lockgraph run: (times, pos, vel, floor_load, info)."""
-    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads)
+def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=None):
+    """Sampled states of a lockgraph run: (times, pos, vel, floor_load, info);
+    ``progress(fraction)`` after each sample."""
+    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads, lock=lock, scale=scale)
     every = max(1, int(round(SAMPLE_EVERY / sc.dt)))
     samples = max(1, int(round(duration / (every * sc.dt))))
     st = sim.state
     times, pos, vel, imp = [st.time], [st.pos], [st.vel], [0.0]
-    for _ in range(samples):
+    for k in range(samples):
         sim.run(every)
+        if progress is not None:
+            progress((k + 1) / samples)
         st = sim.state
         times.append(st.time)
         pos.append(st.pos)
@@ -93,11 +96,12 @@ def run_lockgraph(sc, duration, threads=1):
     return times, np.array(pos), np.array(vel), float(load), info
 
 
-def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
-    """Sampled states of a DEM run: (times, pos, vel, floor_load, info)."""
+def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None, dt=None):
+    """Sampled states of a DEM run: (times, pos, vel, floor_load, info); ``dt``
+    overrides the step chosen from the contact time."""
     samples = max(1, int(round(duration / SAMPLE_EVERY)))
     res = dem.run(sc.state, sc.physics, code, duration, contact, samples=samples,
-                  ranks=ranks, threads=threads, progress=progress)
+                  ranks=ranks, threads=threads, progress=progress, dt=dt)
     k = max(1, int(round(LOAD_WINDOW / SAMPLE_EVERY)))
     mass = sc.state.mass
     pz = np.nansum(mass[None, :] * res.vel[:, :, 2], axis=1)

@@ -78,6 +78,16 @@ def liggghts_binary():
     return path
 
 
+def chromium_binary():
+    """The headless browser that screenshots the report in the tests."""
+    for name in ("chromium", "chromium-browser", "chromium-headless-shell"):
+        path = shutil.which(name)
+        if path:
+            return path
+    raise MissingReference("chromium is not installed; install it with: apt-get update && "
+                           "apt-get install -y --no-install-recommends chromium")
+
+
 def liggghts_version(path):
     """Run LIGGGHTS on an empty input and return its banner's first line."""
     p = subprocess.run([path], input="", capture_output=True, text=True, timeout=60)

@@ -55,6 +55,12 @@ def liggghts(request):
 
 
 @pytest.fixture(scope="session")
+def chromium(request):
+    """The headless browser for the report's screenshot."""
+    return _need(request, references.chromium_binary)
+
+
+@pytest.fixture(scope="session")
 def lammps_lmp(request):
     """The lmp executable (the DEM harness runs LAMMPS as a subprocess)."""
     return _need(request, references.lammps_binary)
