@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 from .errors import InputError
 
-CACHE_VERSION = 1
+CACHE_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,16 @@ class Cache:
     def __init__(self, directory):
         self.directory = str(directory)
         os.makedirs(self.directory, exist_ok=True)
+        self._sweep()
+
+    def _sweep(self):
+        """Remove temporary files left by a campaign that was killed mid-write
+        (their writer's pid is gone)."""
+        for name in os.listdir(self.directory):
+            if name.endswith(".tmp"):
+                pid = name[:-4].rsplit(".", 1)[-1]
+                if pid.isdigit() and not _alive(int(pid)):
+                    os.remove(os.path.join(self.directory, name))
 
     def path(self, run):
         return os.path.join(self.directory, run.key + ".json")
@@ -72,6 +82,16 @@ class Cache:
             json.dump({"kind": run.kind, "params": run.params, "label": run.label,
                        "result": result}, fh)
         os.replace(tmp, path)
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 class Bars:

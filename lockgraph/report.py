@@ -312,7 +312,8 @@ class Page:
             name = f"snapshot_{s}.png"
             pictures.scene_snapshot(sc, os.path.join(self.out, name), f"{TITLES[s]}, N = {n}")
             self.img(name, f"{TITLES[s]}: late state, N = {n}")
-            if s in ("ring", "dish_marble"):
+            # the marble's dish at these sizes is one lock region: the dish shows the graph
+            if s in ("ring", "ring_moonlet", "dish"):
                 name = f"lockgraph_{s}.png"
                 info = pictures.lock_graph_figure(sc, os.path.join(self.out, name), 4.0,
                                                   f"Lock graph, {TITLES[s]}, SCALE 4")
