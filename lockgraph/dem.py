@@ -476,8 +476,9 @@ def code_version(code):
     if code not in _VERSIONS:
         exe = lammps_binary() if code == "lammps" else liggghts_binary()
         try:
-            p = subprocess.run([exe, "-h"] if code == "lammps" else [exe], input="",
-                               capture_output=True, text=True, timeout=120)
+            with tempfile.TemporaryDirectory() as work:  # no log file left in the caller's cwd
+                p = subprocess.run([exe, "-h"] if code == "lammps" else [exe], input="",
+                                   capture_output=True, text=True, timeout=120, cwd=work)
             text = [ln.strip() for ln in (p.stdout + p.stderr).splitlines() if ln.strip()]
             hit = [ln for ln in text if ln.startswith(("LAMMPS", "LIGGGHTS"))]
             # lmp -h opens with "Large-scale Atomic/... Simulator - 22 Jul 2025 - Update 4"

@@ -4,18 +4,10 @@ matplotlib is imported only when a picture is drawn.
 
 Rings are seen from above (x, y); dishes from the side (x, z).
 """
-import os
-
 import numpy as np
 
 from .domains import Dish
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+from .report_charts import pyplot, save
 
 
 def _view(domain):
@@ -24,8 +16,10 @@ def _view(domain):
 
 
 def _big(radius):
-    """Mask of a body much larger than the grains (a marble or moonlet)."""
-    return radius > 3.0 * np.median(radius)
+    """Mask of the largest body if it is much larger than the typical particle
+    (a marble or a moonlet; a ring's size spread is not one)."""
+    top = radius.max()
+    return (radius == top) & (top > 5.0 * np.median(radius))
 
 
 def _frame(ax, domain, pos, radius, axes):
@@ -51,20 +45,10 @@ def _circles(ax, pos, radius, axes, colours, alpha=1.0):
                                         facecolors=colours, edgecolors="none", alpha=alpha))
 
 
-def _save(fig, path):
-    plt = _plt()
-    fig.tight_layout()
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
-
-
 def scene_snapshot(sc, path, title=None):
     """Draw ``sc``'s particles at their true radii (the big body in red) with
     its walls or box; returns ``path``."""
-    plt = _plt()
+    plt = pyplot()
     st, dom = sc.state, sc.physics.domain
     axes, names = _view(dom)
     fig, ax = plt.subplots(figsize=(6.0, 4.8))
@@ -81,7 +65,7 @@ def scene_snapshot(sc, path, title=None):
     ax.set_xlabel(names[0])
     ax.set_ylabel(names[1])
     ax.set_title(title or f"N = {st.n}", fontsize=10)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def lock_regions(sc, scale=4.0):
@@ -103,7 +87,7 @@ def lock_graph_figure(sc, path, scale=4.0, title=None):
     across the periodic boundary are counted but not drawn).  Returns
     {"regions", "edges", "particles", "scale"}: occupied regions and adjacent
     pairs of them."""
-    plt = _plt()
+    plt = pyplot()
     st, dom = sc.state, sc.physics.domain
     axes, names = _view(dom)
     by_id, loff, ladj = lock_regions(sc, scale)
@@ -137,6 +121,6 @@ def lock_graph_figure(sc, path, scale=4.0, title=None):
     ax.set_xlabel(names[0])
     ax.set_ylabel(names[1])
     ax.set_title(title or f"lock graph, SCALE {scale:g}", fontsize=10)
-    _save(fig, path)
+    save(fig, path)
     return {"regions": int(used.sum()), "edges": int(keep.sum()), "particles": int(st.n),
             "scale": float(scale)}

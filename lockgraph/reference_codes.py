@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 
 
 class MissingReference(RuntimeError):
@@ -90,6 +91,8 @@ def chromium_binary():
 
 def liggghts_version(path):
     """Run LIGGGHTS on an empty input and return its banner's first line."""
-    p = subprocess.run([path], input="", capture_output=True, text=True, timeout=60)
+    with tempfile.TemporaryDirectory() as work:  # LIGGGHTS writes log.liggghts where it runs
+        p = subprocess.run([path], input="", capture_output=True, text=True, timeout=60,
+                           cwd=work)
     text = (p.stdout + p.stderr).strip().splitlines()
     return text[0] if text else ""

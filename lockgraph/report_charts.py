@@ -10,15 +10,17 @@ FAMILY_STYLE = {"lockgraph": ("C0", "o"), "lockgraph 2 threads": ("C2", "^"),
                 "LIGGGHTS": ("C4", "P")}
 
 
-def _plt():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (no display needed)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
 
 
-def _save(fig, path):
-    plt = _plt()
+def save(fig, path):
+    """Write ``fig`` to ``path`` whole (a temporary file renamed); returns path."""
+    plt = pyplot()
     fig.tight_layout()
     tmp = path + ".tmp.png"
     fig.savefig(tmp, dpi=100)
@@ -43,7 +45,7 @@ def pareto(rows, x="error", y="wall_s"):
 def speed_accuracy(rows, path, title, xlabel, floor=None, smallest=1e-4):
     """Wall time against error, one series per method family, the Pareto
     front dashed.  Errors below ``smallest`` are drawn at it."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.0, 4.6))
     refs = [r for r in rows if r.get("reference")]
     rows = [r for r in rows if not r.get("reference")]
@@ -70,13 +72,13 @@ def speed_accuracy(rows, path, title, xlabel, floor=None, smallest=1e-4):
     ax.set_ylabel("wall time (s)")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def replay_curves(table, path, title):
     """Replayed events-phase time against thread count P for each lock
     configuration (late state if present), with the measured 2-thread point."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(table), figsize=(5.2 * len(table), 3.8), squeeze=False)
     for ax, (state, res) in zip(axes[0], table.items()):
         for name, rec in res["locks"].items():
@@ -91,12 +93,12 @@ def replay_curves(table, path, title):
         ax.set_ylabel("events phase (ms)")
         ax.set_title(f"{title}, {state} (N = {res['n']})", fontsize=9)
         ax.legend(fontsize=6)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def series(curves, path, title, xlabel, ylabel, logy=False):
     """Plain lines: ``curves`` is [(label, xs, ys)]."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 3.8))
     for label, xs, ys in curves:
         ax.plot(xs, ys, label=label, lw=1)
@@ -106,12 +108,12 @@ def series(curves, path, title, xlabel, ylabel, logy=False):
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def bars(labels, values, path, title, ylabel, logy=False):
     """One bar per label."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.0, 3.8))
     ax.bar(range(len(values)), [v if v is not None else 0.0 for v in values], color="C0")
     ax.set_xticks(range(len(values)))
@@ -120,4 +122,4 @@ def bars(labels, values, path, title, ylabel, logy=False):
         ax.set_yscale("log")
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
-    return _save(fig, path)
+    return save(fig, path)
