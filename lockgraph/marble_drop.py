@@ -133,9 +133,9 @@ def stop(times, z, surface, marble_radius, grain_diameter):
     return float(d), float(times[k] - times[0])
 
 
-def drop_lockgraph(state, physics, dt, duration, threads=1):
+def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=4.0):
     """The marble (last particle) through a lockgraph run: (times, z, vz, info)."""
-    sim = Simulation(state, physics, dt=dt, threads=threads)
+    sim = Simulation(state, physics, dt=dt, threads=threads, lock=lock, scale=scale)
     every = max(1, int(round(SAMPLE_EVERY / dt)))
     times, z, vz = [state.time], [state.pos[-1, 2]], [state.vel[-1, 2]]
     for _ in range(max(1, int(round(duration / (every * dt))))):
@@ -161,14 +161,15 @@ def drop_dem(state, physics, code, duration, contact, ranks=1, progress=None):
 
 
 def penetration(bed, physics, dt, marble_radius, marble_density, height, duration,
-                code="lockgraph", contact=None, threads=1, ranks=1, progress=None):
+                code="lockgraph", contact=None, threads=1, ranks=1, progress=None,
+                lock="graph", scale=4.0):
     """Drop the marble from ``height`` into ``bed`` with ``code`` ("lockgraph",
     "lammps" or "liggghts"); returns a dict: depth (m), rest_time (s), H = height
     + depth (m), impact_speed (m/s), wall_s, info."""
     surface = DO.bed_height(bed.pos, bed.radius, physics.domain.radius)
     state = with_marble(bed, physics, marble_radius, marble_density, height)
     if code == "lockgraph":
-        t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads)
+        t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads, lock, scale)
     else:
         t, z, vz, info = drop_dem(state, physics, code, duration,
                                   contact or dem.Contact("hertz", 1e7, 20), ranks, progress)

@@ -17,6 +17,7 @@ import json
 import math
 import os
 import platform
+import sys
 import time
 
 import numpy as np
@@ -80,6 +81,13 @@ def build(out, mode="quick", scenes=P.SCENES, scheduler=None, cache_dir=None, st
     os.makedirs(out, exist_ok=True)
     cache = Cache(cache_dir or os.path.join(out, "cache"))
     cached = sum(cache.get(r) is not None for r in runs)
+    if cached < len(runs) and scheduler is None:
+        from .simulation import compile_kernels
+
+        say = stream or sys.stderr
+        print("compiling lockgraph's numba kernels (the first time after an install takes "
+              "a few minutes; cached on disk after)", file=say, flush=True)
+        print(f"  {compile_kernels():.1f} s", file=say, flush=True)
     results = run_campaign(runs, cache, scheduler, stream)
     page = Page(out)
     speed = {}

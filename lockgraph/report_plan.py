@@ -19,7 +19,7 @@ MODES = ("smoke", "quick", "full")
 SCALES = {"smoke": (1.2, 8.0), "quick": (1.2, 2.0, 4.0, 6.0, 8.0),
           "full": (1.2, 2.0, 4.0, 6.0, 8.0)}
 # ring scenes: particles, orbits, REBOUND steps (fractions of an orbit)
-RING = {"smoke": (1500, 0.1, (1e-2, 3e-3)), "quick": (2000, 1.0, (1e-2, 3e-3, 1e-3, 3e-4)),
+RING = {"smoke": (1500, 0.1, (1e-2, 3e-3)), "quick": (2000, 1.0, (1e-2, 3e-3, 1e-3)),
         "full": (20000, 1.0, (1e-2, 3e-3, 1e-3, 3e-4))}
 # the ring's late state is compared; the moonlet's late ring is thicker than REBOUND's
 # root box (lx) at these sizes, so the moonlet runs from the early state
@@ -27,7 +27,7 @@ RING_STATE = {"ring": "late", "ring_moonlet": "early"}
 # dish (settling): grains, simulated time (s), seeds, collapse-guard times (s),
 # DEM stiffnesses (Pa), reference stiffness and dt fraction
 DISH = {"smoke": (150, 0.1, (1,), (3e-4, 1e-4), (1e7,), (1e8, 20.0)),
-        "quick": (500, 0.25, (1, 2), (3e-4, 1e-4, 3e-5), (1e7,), (1e8, 20.0)),
+        "quick": (500, 0.25, (1,), (3e-4, 1e-4, 3e-5), (1e7,), (1e8, 20.0)),
         "full": (1000, 0.35, (1, 2), (3e-4, 1e-4, 3e-5, 1e-5), (1e7, 1e8), (1e9, 50.0))}
 DISH_RADIUS = 0.005  # m: a 5 mm dish, so that a few hundred grains make a bed
 # dish_marble: bed grains, drop height (m), marble radius (m) and density, guard times
@@ -70,6 +70,7 @@ def dish_runs(mode):
         for tc in tcs:
             runs.append(Run("dish_lockgraph", {**base, "tc": tc}, f"lockgraph tc={tc:g}",
                             "dish/speed"))
+        # quick: SCALE 1.2 and 2 and the grid (each 2-thread settling costs ~10 s)
         for suffix, s in _threads_series(SCALES[mode][:2] if mode != "full" else SCALES[mode]):
             runs.append(Run("dish_lockgraph", {**base, "tc": tcs[1], **s},
                             f"lockgraph tc={tcs[1]:g} {suffix}", "dish/speed"))
@@ -93,8 +94,12 @@ def marble_runs(mode):
             "marble_radius": radius, "marble_density": density}
     runs = [Run("marble_drop", {**base, "code": "lockgraph", "tc": tc}, f"lockgraph tc={tc:g}",
                 "dish_marble/speed") for tc in tcs]
-    runs.append(Run("marble_drop", {**base, "code": "lockgraph", "tc": tcs[-1], "threads": 2},
-                    f"lockgraph tc={tcs[-1]:g}, 2 threads", "dish_marble/speed"))
+    # 2 threads: SCALE 4 (a 2-thread drop costs as much as a DEM run); full: every variant
+    variants = (_threads_series(SCALES[mode]) if mode == "full"
+                else [("graph SCALE 4, 2 threads", {"threads": 2, "lock": "graph", "scale": 4.0})])
+    for suffix, s in variants:
+        runs.append(Run("marble_drop", {**base, "code": "lockgraph", "tc": tcs[-1], **s},
+                        f"lockgraph tc={tcs[-1]:g} {suffix}", "dish_marble/speed"))
     for code in ("lammps", "liggghts"):
         for e in stiff:
             runs.append(Run("marble_drop", {**base, "code": code, "stiffness": e},

@@ -148,7 +148,8 @@ def dish_dem(code, n, seed, time, stiffness, cylinder_radius, dt_fraction=20.0, 
 
 
 def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_density,
-                tc=None, threads=1, stiffness=1e7, dt_fraction=20.0, ranks=1, progress=None):
+                tc=None, threads=1, lock="graph", scale=4.0, stiffness=1e7, dt_fraction=20.0,
+                ranks=1, progress=None):
     """The marble dropped from ``height`` (m) into a bed settled by LAMMPS:
     penetration depth (m), time to rest (s), wall time."""
     params = {"cylinder_radius": cylinder_radius}
@@ -159,7 +160,7 @@ def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_de
     if code == "lockgraph":
         ph = Physics(ph.domain, ph.forces, ph.restitution, CollapseGuard(tc))
         r = M.penetration(bed, ph, sc.dt, marble_radius, marble_density, height,
-                          MARBLE_DURATION, "lockgraph", threads=threads)
+                          MARBLE_DURATION, "lockgraph", threads=threads, lock=lock, scale=scale)
     else:
         r = M.penetration(bed, ph, sc.dt, marble_radius, marble_density, height,
                           MARBLE_DURATION, code, dem.Contact("hertz", stiffness, dt_fraction),

@@ -143,12 +143,18 @@ def marble_rows(runs, results):
     (ref_label, (ref,)), = refs.items()
     d = ref["grain_diameter"]
     rows = []
-    for label, (r,) in {**_by_label(runs, results, "dish_marble/speed"), **refs}.items():
+    speed = _by_label(runs, results, "dish_marble/speed")
+    for label, (r,) in {**speed, **refs}.items():
         note = (f"depth {1e3 * r['depth']:.2f} mm, at rest after "
                 f"{r['rest_time'] * 1e3:.0f} ms" if r["rest_time"] is not None and
                 math.isfinite(r["rest_time"]) else f"depth {1e3 * r['depth']:.2f} mm, not at rest")
         if r.get("failures"):
             note += f"; failures: {r['failures']}"
+        seq = speed.get(label.split(" graph")[0].split(" grid")[0])
+        if "threads" in label and seq:
+            same = r["trajectory"] == seq[0]["trajectory"]
+            note = ("marble's trajectory bitwise identical to the sequential run; " if same
+                    else "marble's trajectory DIFFERS from the sequential run; ") + note
         rows.append({"scene": "dish_marble", "method": label, "family": _family(label),
                      "reference": label == ref_label,
                      "setting": _setting(label), "wall_s": r["wall_s"],

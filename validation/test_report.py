@@ -125,6 +125,10 @@ def test_every_table_has_every_scene_and_method(smoke):
                                       else set())
         expect = {r.label for r in runs if r.group in groups}
         assert methods == expect, scene
+        # exact policy: every 2-thread run reproduces the sequential run bit for bit
+        for row in speed[1:]:
+            if "2 threads" in row[0]:
+                assert "bitwise identical to the sequential run" in row[4], row
         (paper,) = page.tables[f"paper paper-{scene}"]
         assert [row[0] for row in paper[1:]] == [key_name(k) for k in LOCKS]
         assert all(cell not in ("", "\u2013") for row in paper[1:] for cell in row[1:4]), scene
