@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 from .errors import InputError
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 
 
 @dataclass(frozen=True)

@@ -144,8 +144,13 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
         times.append(st.time)
         z.append(st.pos[-1, 2])
         vz.append(st.vel[-1, 2])
-    info = {"wall_s": sim.wall_s, "collisions": sim.stats["collisions"],
-            "max_overlap": sim.stats["max_overlap"]}
+    stats = sim.stats
+    final = sim.state
+    info = {"wall_s": sim.wall_s, "collisions": stats["collisions"],
+            "max_overlap": stats["max_overlap"], "threads": stats["threads"],
+            "violations": stats["violations"], "repairs": stats["repairs"],
+            # every particle's final state: a threaded run must reproduce it bit for bit
+            "state_sha1": hashlib.sha1(final.pos.tobytes() + final.vel.tobytes()).hexdigest()}
     sim.close()
     return np.array(times), np.array(z), np.array(vz), info
 

@@ -168,7 +168,9 @@ def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_de
     return {"wall_s": r["wall_s"], "depth": r["depth"], "rest_time": r["rest_time"],
             "grain_diameter": 2.0 * float(np.median(bed.radius)), "n": int(bed.n) + 1,
             "surface": r["surface"], "trajectory": r["trajectory"],
-            "failures": _plain(r["info"].get("failures", {}))}
+            "failures": _plain(r["info"].get("failures", {})),
+            **{k: r["info"][k] for k in ("violations", "repairs", "state_sha1")
+               if k in r["info"]}}
 
 
 def paper_table(scene, state, n, steps, p=16, warm=1, progress=None):

@@ -152,9 +152,12 @@ def marble_rows(runs, results):
             note += f"; failures: {r['failures']}"
         seq = speed.get(label.split(" graph")[0].split(" grid")[0])
         if "threads" in label and seq:
-            same = r["trajectory"] == seq[0]["trajectory"]
-            note = ("marble's trajectory bitwise identical to the sequential run; " if same
-                    else "marble's trajectory DIFFERS from the sequential run; ") + note
+            same = (r["trajectory"] == seq[0]["trajectory"]
+                    and r.get("state_sha1") == seq[0].get("state_sha1"))
+            note = ("final state bitwise identical to the sequential run; " if same
+                    else "final state DIFFERS from the sequential run; ") + note
+            note += (f"; {r.get('violations', 0)} causality violations detected, "
+                     f"{r.get('repairs', 0)} steps repaired")
         rows.append({"scene": "dish_marble", "method": label, "family": _family(label),
                      "reference": label == ref_label,
                      "setting": _setting(label), "wall_s": r["wall_s"],
