@@ -86,7 +86,8 @@ def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=Non
     stats = sim.stats
     sim.close()
     times = np.array(times)
-    k = max(1, int(round(LOAD_WINDOW / (every * sc.dt))))
+    # a run shorter than the window averages over all of it
+    k = min(max(1, int(round(LOAD_WINDOW / (every * sc.dt)))), len(imp) - 1)
     weight = float(sc.state.mass.sum() * sc.physics.g)
     load = (imp[-1] - imp[-1 - k]) / ((times[-1] - times[-1 - k]) * weight)
     info = {"wall_s": sim.wall_s, "collisions": stats["collisions"],
@@ -102,7 +103,7 @@ def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None, dt=N
     samples = max(1, int(round(duration / SAMPLE_EVERY)))
     res = dem.run(sc.state, sc.physics, code, duration, contact, samples=samples,
                   ranks=ranks, threads=threads, progress=progress, dt=dt)
-    k = max(1, int(round(LOAD_WINDOW / SAMPLE_EVERY)))
+    k = min(max(1, int(round(LOAD_WINDOW / SAMPLE_EVERY))), len(res.times) - 1)
     mass = sc.state.mass
     pz = np.nansum(mass[None, :] * res.vel[:, :, 2], axis=1)
     weight = float(mass.sum() * sc.physics.g)

@@ -94,3 +94,15 @@ def test_uehara_exponent_recovers_one_third():
     H = np.array([0.02, 0.08, 0.32])
     d = np.array([uehara_depth(2500, 2330, 0.006, h, 0.5) for h in H])
     assert uehara_exponent(H, d) == pytest.approx(1 / 3, rel=1e-12)
+
+
+def test_a_run_shorter_than_the_load_window_averages_over_all_of_it():
+    """compare_dish.run_lockgraph over 30 ms (< the 100 ms load window): the
+    floor load is the mean over the whole run, finite, not an index error."""
+    from lockgraph import scenarios
+    from lockgraph.compare_dish import LOAD_WINDOW, run_lockgraph
+
+    sc = scenarios.load("dish", "early", n=60, params={"cylinder_radius": 0.003})
+    times, pos, vel, load, info = run_lockgraph(sc, 0.03)
+    assert times[-1] < LOAD_WINDOW and len(times) == 4
+    assert math.isfinite(load) and load >= 0.0  # the block is still falling: little load
