@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 from .errors import InputError
 
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 
 
 @dataclass(frozen=True)

@@ -97,12 +97,11 @@ def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=Non
     return times, np.array(pos), np.array(vel), float(load), info
 
 
-def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None, dt=None):
-    """Sampled states of a DEM run: (times, pos, vel, floor_load, info); ``dt``
-    overrides the step chosen from the contact time."""
+def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
+    """Sampled states of a DEM run: (times, pos, vel, floor_load, info)."""
     samples = max(1, int(round(duration / SAMPLE_EVERY)))
     res = dem.run(sc.state, sc.physics, code, duration, contact, samples=samples,
-                  ranks=ranks, threads=threads, progress=progress, dt=dt)
+                  ranks=ranks, threads=threads, progress=progress)
     k = min(max(1, int(round(LOAD_WINDOW / SAMPLE_EVERY))), len(res.times) - 1)
     mass = sc.state.mass
     pz = np.nansum(mass[None, :] * res.vel[:, :, 2], axis=1)

@@ -150,7 +150,7 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
             "max_overlap": stats["max_overlap"], "threads": stats["threads"],
             "violations": stats["violations"], "repairs": stats["repairs"],
             # every particle's final state: a threaded run must reproduce it bit for bit
-            "state_sha1": hashlib.sha1(final.pos.tobytes() + final.vel.tobytes()).hexdigest()}
+            "state_hash": final.sha256()}
     sim.close()
     return np.array(times), np.array(z), np.array(vz), info
 

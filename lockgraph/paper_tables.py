@@ -173,11 +173,16 @@ def run_case(sc, steps, p_table, warm, step_ovh, progress=None):
 
 
 def finite(obj):
-    """JSON-safe: non-finite floats become None (the paper's '>> 150000 s')."""
+    """JSON-safe copy: numpy scalars and arrays become Python numbers and lists,
+    non-finite floats None (the paper's '>> 150000 s')."""
     if isinstance(obj, dict):
         return {(k if isinstance(k, str) else str(k)): finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [finite(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite(obj.tolist())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
     if isinstance(obj, (float, np.floating)):
         return float(obj) if math.isfinite(obj) else None
     if isinstance(obj, np.integer):

@@ -19,9 +19,11 @@ from . import marble_drop as M
 from .compare import sampled, state_arrays
 from .compare_dish import measure, run_dem, run_lockgraph
 from .errors import InelasticCollapseError
+from .paper_tables import finite
 from .physics import Physics
 from .restitution import CollapseGuard
 from .simulation import Simulation
+from .state import state_sha256
 
 SAMPLES = 10          # snapshots over a ring run (sigma_x is their mean)
 MARBLE_DURATION = 0.15  # s after release: the marble stops well within it
@@ -69,9 +71,9 @@ def ring_lockgraph(scene, n, seed, orbits, state="late", dt_factor=1.0, threads=
             "sigma_x": float(np.mean([x["sigma_x"] for x in snaps])),
             "violations": s["violations"], "repairs": s["repairs"],
             "mean_concurrency": s["mean_concurrency"],
-            "locks": _plain(s["locks"]),
+            "locks": finite(s["locks"]),
             # a fingerprint of the final state: the exact policy must reproduce it bit for bit
-            "state_hash": _hash(final.pos, final.vel)}
+            "state_hash": final.sha256()}
 
 
 def ring_rebound(scene, n, seed, orbits, dt_orbits, state="late", progress=None):
@@ -112,9 +114,9 @@ def _dish_summary(sc, times, pos, vel, load, info):
         obs = measure(times, pos, vel, sc.state.radius, sc.physics.domain.radius, load)[0]
     return {"wall_s": info["wall_s"], "n": int(sc.state.n), "times": times.tolist(),
             "ke": ke.tolist(), "settle_time": float(DO.settle_time(times, vel)),
-            "observables": _plain(obs), "floor_load": float(load),
+            "observables": finite(obs), "floor_load": float(load),
             "max_overlap": float(info.get("max_overlap", 0.0)),
-            "failures": _plain(info.get("failures", {})),
+            "failures": finite(info.get("failures", {})),
             "steps": int(info["steps"]), "dt": float(info["dt"])}
 
 
@@ -128,7 +130,7 @@ def dish_lockgraph(n, seed, time, tc, cylinder_radius, threads=1, lock="graph", 
     times, pos, vel, load, info = run_lockgraph(sc, time, threads=threads, lock=lock,
                                                 scale=scale, progress=progress)
     out = _dish_summary(sc, times, pos, vel, load, info)
-    out["state_hash"] = _hash(pos[-1], vel[-1])  # 2 threads must reproduce it bit for bit
+    out["state_hash"] = state_sha256(pos[-1], vel[-1])  # 2 threads must reproduce it bit for bit
     return out
 
 
@@ -168,8 +170,8 @@ def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_de
     return {"wall_s": r["wall_s"], "depth": r["depth"], "rest_time": r["rest_time"],
             "grain_diameter": 2.0 * float(np.median(bed.radius)), "n": int(bed.n) + 1,
             "surface": r["surface"], "trajectory": r["trajectory"],
-            "failures": _plain(r["info"].get("failures", {})),
-            **{k: r["info"][k] for k in ("violations", "repairs", "state_sha1")
+            "failures": finite(r["info"].get("failures", {})),
+            **{k: r["info"][k] for k in ("violations", "repairs", "state_hash")
                if k in r["info"]}}
 
 
@@ -186,7 +188,7 @@ def paper_table(scene, state, n, steps, p=16, warm=1, progress=None):
     out = run_case(sc, steps, p, warm, ovh, progress=lambda msg: progress(0.5, msg.strip()))
     out["step_overhead_s"] = ovh
     out["wall_s"] = time.perf_counter() - t0
-    return _plain(out)
+    return finite(out)
 
 
 def collapse(n, seed, time, cylinder_radius, guard, progress=None):
@@ -225,7 +227,7 @@ def policy_check(scene, state, n, steps, threads=2, scale=4.0, progress=None):
         try:
             sim.run(steps)
             st = sim.state
-            out[name] = {"wall_s": sim.wall_s, "state_hash": _hash(st.pos, st.vel),
+            out[name] = {"wall_s": sim.wall_s, "state_hash": st.sha256(),
                          "violations": sim.stats["violations"], "repairs": sim.stats["repairs"],
                          "violations_per_step": [h["violations"] for h in sim.history],
                          "pos": st.pos}
@@ -240,33 +242,6 @@ def policy_check(scene, state, n, steps, threads=2, scale=4.0, progress=None):
     out["wall_s"] = sum(out[k]["wall_s"] for k in ("sequential", "exact", "paper"))
     out["n"] = int(sc.state.n)
     return out
-
-
-def _hash(*arrays):
-    import hashlib
-
-    h = hashlib.sha1()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
-
-
-def _plain(obj):
-    """JSON-safe copy: numpy scalars and arrays become Python numbers and lists,
-    non-finite floats None."""
-    if isinstance(obj, dict):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _plain(obj.tolist())
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return obj
 
 
 KINDS = {f.__name__: f for f in (ring_lockgraph, ring_rebound, dish_lockgraph, dish_dem,

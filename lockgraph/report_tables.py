@@ -153,7 +153,7 @@ def marble_rows(runs, results):
         seq = speed.get(label.split(" graph")[0].split(" grid")[0])
         if "threads" in label and seq:
             same = (r["trajectory"] == seq[0]["trajectory"]
-                    and r.get("state_sha1") == seq[0].get("state_sha1"))
+                    and r.get("state_hash") == seq[0].get("state_hash"))
             note = ("final state bitwise identical to the sequential run; " if same
                     else "final state DIFFERS from the sequential run; ") + note
             note += (f"; {r.get('violations', 0)} causality violations detected, "

@@ -14,6 +14,15 @@ from .errors import InputError
 MAX_PARTICLES = (1 << 26) - 1  # candidate entries pack the partner index into 26 bits
 
 
+def state_sha256(pos, vel):
+    """sha256 of the pos then vel float64 bytes (C order): the fingerprint by which
+    a threaded run is checked to reproduce the sequential one bit for bit."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(pos, np.float64).tobytes())
+    h.update(np.ascontiguousarray(vel, np.float64).tobytes())
+    return h.hexdigest()
+
+
 @dataclass
 class State:
     """Particles of a hard-sphere system.
@@ -86,10 +95,7 @@ class State:
 
     def sha256(self):
         """sha256 of the pos then vel float64 bytes (C order, ordered by id)."""
-        h = hashlib.sha256()
-        h.update(np.ascontiguousarray(self.pos, np.float64).tobytes())
-        h.update(np.ascontiguousarray(self.vel, np.float64).tobytes())
-        return h.hexdigest()
+        return state_sha256(self.pos, self.vel)
 
     def kinetic_energy(self):
         return 0.5 * float(np.sum(self.mass[:, None] * self.vel * self.vel))
