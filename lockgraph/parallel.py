@@ -51,6 +51,7 @@ from .kernels import (I_PAPER, NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CL
 from .neighbors import JCOUNT, LCOUNT
 
 G, ABORT, STATUS = 0, 8, 16
+JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
 NCTRL = 24
 DLOCK, DCLOCK, DINFL, DPROG = 0, 8, 9, 10  # per-domain row of dctl
 NDCTL = 16
@@ -214,6 +215,23 @@ def _all_idle(dctl, ndom):
     return True
 
 
+@kernel(inline=True)
+def _pause(rng):
+    """Fault injection for tests: one time in 8 spin for up to 2^16 cycles
+    (~20 us, tens of events' worth; a pseudo-random length from the xorshift
+    state rng); returns the next state."""
+    rng ^= (rng << 13) & 0x7FFFFFFFFFFFFFFF
+    rng ^= rng >> 7
+    rng ^= (rng << 17) & 0x7FFFFFFFFFFFFFFF
+    rng &= 0x7FFFFFFFFFFFFFFF
+    if rng & 7 == 0:
+        n = (rng >> 12) & 0xFFFF
+        c = cycles()
+        while cycles() - c < n:
+            cpu_relax()
+    return rng
+
+
 @kernel
 def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, ctrl, dctl,
            window, stall_cycles):
@@ -248,6 +266,7 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
     nblk = 0  # consecutive blocked picks of this thread
     wait_from = 0
     seen = -1
+    rng = load(ctrl, JITTER) * (2 * d + 1)
     while True:
         if load(ctrl, ABORT) != 0:
             return OK
@@ -337,6 +356,8 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             continue
         waiting = False
         nblk = 0
+        if rng != 0:  # holding the event's regions: the others run on meanwhile
+            rng = _pause(rng)
         c0 = cycles()
         status = OK
         jw = -1
@@ -356,6 +377,8 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             high = tb
         st[S_CONC] += cycles() - c0
         st[S_CLAIMS] += 1
+        if rng != 0:
+            rng = _pause(rng)
         # commit: the queues of the slots whose events changed
         if boundary:
             spin_lock(ctrl, G)
@@ -411,6 +434,8 @@ class Workers:
         self.ctrl = np.zeros(NCTRL, np.int64)
         self.dctl = np.zeros(threads * NDCTL, np.int64)
         self.fault = None  # tests: a thread that raises (d) or never works (("stall", d))
+        self.jitter = 0  # tests: a nonzero seed makes the workers pause at random
+        self.stacks = None  # per-thread search stacks (rows), sized on first use
         self.wall_s = 0.0
 
     def close(self):
@@ -422,11 +447,15 @@ class Workers:
         from concurrent.futures import wait
 
         self.ctrl[:] = 0
+        self.ctrl[JITTER] = self.jitter
         dom, bd, dlo, dhi, dtour_t, dtour_s = doms
         self.dctl[:] = 0
         for d in range(self.threads):  # each domain's clock: its next event
             t = dtour_t[d][1] if dtour_s[d][1] >= 0 else np.inf
             self.dctl[d * NDCTL + DCLOCK] = np.float64(t).view(np.int64)
+        work = bundles[1][3]
+        if self.stacks is None or self.stacks.shape[1] != work.shape[0]:
+            self.stacks = np.zeros((self.threads, work.shape[0]), work.dtype)
         t0 = time.perf_counter()
         futures = [self.pool.submit(self._one, d, bundles, stt, locks, lstate, doms, window)
                    for d in range(self.threads)]
@@ -445,6 +474,9 @@ class Workers:
             if self.fault == ("stall", d):
                 return idle_until_abort(self.ctrl)
             parts, step, tree, nbrs, evq, jour, cfg = bundles
+            # the tree-search stack of ``grow`` is scratch: one per thread (a shared
+            # one lets two threads' searches overwrite each other's nodes and miss pairs)
+            step = step[:3] + (self.stacks[d],)
             return worker(d, parts, step, tree, nbrs, evq, jour, cfg, stt[d], locks, lstate, doms,
                           self.ctrl, self.dctl, window, self.stall_cycles)
         except BaseException:

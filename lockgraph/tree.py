@@ -541,9 +541,11 @@ def raise_reach(ntop, nreach_bits, slot, value):
     """
     nd = find_leaf(ntop, slot)
     bits = float_bits(value)
+    # all the way up, even past a node already as high: another thread may have
+    # raised that node and not yet its ancestors, and this thread's search must
+    # not start before its own raise is complete
     while nd >= 0:
-        if fetch_max(nreach_bits, nd, bits) >= bits:
-            return  # already there: so are its ancestors (raised bottom-up)
+        fetch_max(nreach_bits, nd, bits)
         nd = ntop[nd, PARENT]
 
 
