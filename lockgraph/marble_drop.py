@@ -17,6 +17,7 @@ have no mu of their own; what is checked is the exponent of H.
 import hashlib
 import json
 import math
+import time as _time
 
 import numpy as np
 
@@ -133,17 +134,29 @@ def stop(times, z, surface, marble_radius, grain_diameter):
     return float(d), float(times[k] - times[0])
 
 
-def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=4.0):
-    """The marble (last particle) through a lockgraph run: (times, z, vz, info)."""
+PROGRESS_EVERY = 30.0  # s of wall time between progress lines of a long drop
+
+
+def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=4.0,
+                   progress=None):
+    """The marble (last particle) through a lockgraph run: (times, z, vz, info).
+    ``progress(msg)``, if given, hears about a long run every PROGRESS_EVERY s."""
     sim = Simulation(state, physics, dt=dt, threads=threads, lock=lock, scale=scale)
     every = max(1, int(round(SAMPLE_EVERY / dt)))
     times, z, vz = [state.time], [state.pos[-1, 2]], [state.vel[-1, 2]]
+    t_start = state.time
+    last = _time.perf_counter()
     for _ in range(max(1, int(round(duration / (every * dt))))):
         sim.run(every)
         st = sim.state
         times.append(st.time)
         z.append(st.pos[-1, 2])
         vz.append(st.vel[-1, 2])
+        if progress is not None and _time.perf_counter() - last >= PROGRESS_EVERY:
+            last = _time.perf_counter()
+            progress(f"lockgraph: {st.time - t_start:.4f} of {duration:g} s simulated, "
+                     f"{sim.stats['collisions']:.3g} collisions, {sim.wall_s:.0f} s wall, "
+                     f"marble at z = {st.pos[-1, 2] * 1e3:.2f} mm")
     stats = sim.stats
     final = sim.state
     info = {"wall_s": sim.wall_s, "collisions": stats["collisions"],
@@ -174,7 +187,8 @@ def penetration(bed, physics, dt, marble_radius, marble_density, height, duratio
     surface = DO.bed_height(bed.pos, bed.radius, physics.domain.radius)
     state = with_marble(bed, physics, marble_radius, marble_density, height)
     if code == "lockgraph":
-        t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads, lock, scale)
+        t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads, lock, scale,
+                                        progress)
     else:
         t, z, vz, info = drop_dem(state, physics, code, duration,
                                   contact or dem.Contact("hertz", 1e7, 20), ranks, progress)

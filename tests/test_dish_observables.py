@@ -106,3 +106,17 @@ def test_a_run_shorter_than_the_load_window_averages_over_all_of_it():
     times, pos, vel, load, info = run_lockgraph(sc, 0.03)
     assert times[-1] < LOAD_WINDOW and len(times) == 4
     assert math.isfinite(load) and load >= 0.0  # the block is still falling: little load
+
+
+def test_a_long_marble_drop_reports_progress(monkeypatch):
+    """drop_lockgraph says how far a long run has got (here: every sample)."""
+    from lockgraph import marble_drop as M
+    from lockgraph import scenarios
+
+    sc = scenarios.load("dish", "early", n=60, params={"cylinder_radius": 0.003})
+    state = M.with_marble(sc.state, sc.physics, 0.001, 2500.0, 0.01)
+    monkeypatch.setattr(M, "PROGRESS_EVERY", 0.0)
+    heard = []
+    t, z, vz, info = M.drop_lockgraph(state, sc.physics, sc.dt, 0.003, progress=heard.append)
+    assert len(heard) == len(t) - 1 == 3
+    assert heard[-1].startswith("lockgraph: 0.0030 of 0.003 s simulated")
