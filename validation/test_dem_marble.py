@@ -60,9 +60,14 @@ def test_marble_stops_like_in_dem(dem_code, code, marble_reports):
 
 PAPER = {"n": 8701, "cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
 HEIGHTS = (0.02, 0.08, 0.32)
-# Uehara et al. (2003) measured d ~ H^(1/3) for frictional grains; the band
-# allows a frictionless bed's different resistance law.
-EXPONENT = (1 / 3 - 0.15, 1 / 3 + 0.15)
+# Uehara et al. (2003) measured d ~ H^(1/3) for frictional grains.  These grains
+# are frictionless, and both codes find a weaker law: measured 2026-11-22 on the
+# LAMMPS bed with 0.1 s drops, exponents 0.173 (lockgraph) and 0.186 (LAMMPS),
+# depths 6.62 / 8.36 / 10.25 mm against 6.31 / 7.96 / 10.09 mm.  So the test
+# asks lockgraph's exponent to match the DEM code's within EXPONENT_TOL (a 5 %
+# depth error at both ends of the 12x range of H, opposite ways, moves the
+# slope by 0.04), and states the distance to 1/3 without asserting on it.
+EXPONENT_TOL = 0.05
 
 
 @pytest.mark.paper_scale
@@ -70,7 +75,10 @@ EXPONENT = (1 / 3 - 0.15, 1 / 3 + 0.15)
 def test_deep_bed_penetration_and_uehara_scaling(dem_code, code):
     """A bed 40 grain diameters deep (8,700 grains in a 7.5 mm dish), a 6 mm
     marble from 2, 8 and 32 cm: depths and times to rest against the DEM code,
-    and d against H = h + d on a log-log fit."""
+    and the exponent of d against H = h + d (log-log fit) against the DEM
+    code's.  Cost: lockgraph took 7-10 min per 0.1 s drop here (the resting
+    bed collides 5e9-1.3e10 times per simulated second, and more as it
+    compacts), so the 0.2 s drops take over an hour per code."""
     dem_code(code)
     res = compare_marble(against=code, n=PAPER["n"], seeds=(1,), heights=HEIGHTS, time=0.2,
                          params={k: v for k, v in PAPER.items() if k != "n"},
@@ -78,6 +86,7 @@ def test_deep_bed_penetration_and_uehara_scaling(dem_code, code):
     for o in res["per_height"]:
         print(code, o)
         assert o["depth_agree"] and o["rest_agree"], o
-    print(code, "Uehara exponents", res["uehara_exponent"])
-    for side, x in res["uehara_exponent"].items():
-        assert EXPONENT[0] <= x <= EXPONENT[1], (side, x)
+    exps = res["uehara_exponent"]
+    print(code, "Uehara exponents", exps, "(Uehara et al., frictional grains: 1/3)")
+    assert 0.0 < exps["lockgraph"] and 0.0 < exps["reference"]  # deeper from higher
+    assert abs(exps["lockgraph"] - exps["reference"]) <= EXPONENT_TOL, exps
