@@ -81,15 +81,18 @@ def cycles_per_second():
 
 
 @kernel
-def classify_regions(lock_of, loff, ladj, dlo, dhi, dom, bd, queue):
-    """dom[r]: the domain of region r's particles (-1 if they span several);
-    bd[r]: lock-graph distance from r to the nearest region of another domain
-    (0 for a mixed region), by breadth-first search; capped at 64."""
+def classify_regions(lock_of, loff, ladj, dlo, dhi, dom, bd, queue, cap):
+    """dom[r]: the domain of region r's particles (-1 if they span several, -2
+    if it has none); bd[r]: lock-graph distance from r to the nearest region of
+    another domain (0 for a mixed region; empty regions belong to no domain but
+    paths run through them), by breadth-first search, capped at ``cap``: the
+    search stops there, so it visits only the regions near the cuts.
+    Returns the number of particles in regions at distance >= cap."""
     nreg = dom.shape[0]
     ndom = dlo.shape[0]
     for r in range(nreg):
         dom[r] = -2
-        bd[r] = 64
+        bd[r] = cap
     for d in range(ndom):
         for s in range(dlo[d], dhi[d]):
             r = lock_of[s]
@@ -99,14 +102,19 @@ def classify_regions(lock_of, loff, ladj, dlo, dhi, dom, bd, queue):
                 dom[r] = -1
     head = 0
     tail = 0
+    # the queue in order of distance (each region enters it once): mixed regions,
+    # then those next to another domain's, then the search's
     for r in range(nreg):
         if dom[r] == -1:
             bd[r] = 0
             queue[tail] = r
             tail += 1
-            continue
+    for r in range(nreg):
+        if dom[r] < 0:
+            continue  # mixed: done; empty: no events of its own, the search passes through
         for k in range(loff[r], loff[r + 1]):
-            if dom[ladj[k]] != dom[r]:
+            y = dom[ladj[k]]
+            if y != -2 and y != dom[r]:
                 bd[r] = 1
                 queue[tail] = r
                 tail += 1
@@ -114,12 +122,19 @@ def classify_regions(lock_of, loff, ladj, dlo, dhi, dom, bd, queue):
     while head < tail:
         r = queue[head]
         head += 1
+        if bd[r] + 1 >= cap:
+            continue
         for k in range(loff[r], loff[r + 1]):
             x = ladj[k]
             if bd[x] > bd[r] + 1:
                 bd[x] = bd[r] + 1
                 queue[tail] = x
                 tail += 1
+    far = 0
+    for s in range(lock_of.shape[0]):
+        if bd[lock_of[s]] >= cap:
+            far += 1
+    return far
 
 
 @kernel(inline=True)

@@ -556,46 +556,25 @@ def identity(perm):
 
 
 @kernel
-def permute_vec(a, perm, scratch):
-    """In place a[k] = a_old[perm[k]] for a 1-D array (no temporary copies)."""
+def permute_vec(a, perm, buf):
+    """In place a[k] = a_old[perm[k]] for a 1-D array, through ``buf`` (at least
+    N entries of a's type): a gather, whose loads are independent of each other
+    (following the permutation's cycles in place chains every load on the last
+    and measured 7x slower at N = 2e5)."""
     n = perm.shape[0]
-    scratch[:] = 0
-    for s in range(n):
-        if scratch[s] or perm[s] == s:
-            continue
-        tmp = a[s]
-        k = s
-        while True:
-            scratch[k] = 1
-            src = perm[k]
-            if src == s:
-                a[k] = tmp
-                break
-            a[k] = a[src]
-            k = src
+    for k in range(n):
+        buf[k] = a[perm[k]]
+    for k in range(n):
+        a[k] = buf[k]
 
 
 @kernel
-def permute_mat3(a, perm, scratch):
-    """In place a[k, :] = a_old[perm[k], :] for an (N,3) array."""
+def permute_mat3(a, perm, buf):
+    """In place a[k, :] = a_old[perm[k], :] for an (N,3) array, a column at a
+    time through ``buf`` (N entries): a third of the memory a row buffer needs."""
     n = perm.shape[0]
-    scratch[:] = 0
-    for s in range(n):
-        if scratch[s] or perm[s] == s:
-            continue
-        t0 = a[s, 0]
-        t1 = a[s, 1]
-        t2 = a[s, 2]
-        k = s
-        while True:
-            scratch[k] = 1
-            src = perm[k]
-            if src == s:
-                a[k, 0] = t0
-                a[k, 1] = t1
-                a[k, 2] = t2
-                break
-            a[k, 0] = a[src, 0]
-            a[k, 1] = a[src, 1]
-            a[k, 2] = a[src, 2]
-            k = src
+    for c in range(3):
+        for k in range(n):
+            buf[k] = a[perm[k], c]
+        for k in range(n):
+            a[k, c] = buf[k]

@@ -11,6 +11,7 @@ import pytest
 
 from lockgraph import scenarios
 from lockgraph.engine import Engine
+from lockgraph.parallel import INTERIOR, classify_regions
 
 SCENES = {
     "ring": dict(n=800, params={"dispersion": 0.003, "dt": 60.0}),
@@ -85,6 +86,45 @@ class TestLockRegions:
         st = regions.stats()
         assert st["regions"] == regions.count
         assert 0 <= st["mean_degree"] <= st["max_degree"]
+
+    @pytest.mark.parametrize("ndom", [2, 3, 4])
+    def test_distance_to_other_domains(self, case, ndom):
+        """classify_regions against brute force: each region's domain (-1 when
+        its particles span domains) and its hop distance to the nearest region
+        of another domain (BFS from every region over the adjacency; empty
+        regions belong to no domain), capped at INTERIOR; the particles at the
+        cap are counted."""
+        *_, eng, regions, domain = case
+        n, r = eng.n, regions.count
+        cuts = [n * k // ndom for k in range(ndom + 1)]
+        dlo, dhi = np.array(cuts[:-1], np.int64), np.array(cuts[1:], np.int64)
+        owner = np.searchsorted(dhi, np.arange(n), side="right")
+        doms = [set(owner[regions.lock_of == x].tolist()) for x in range(r)]
+        want_dom = np.array([-2 if not d else next(iter(d)) if len(d) == 1 else -1
+                             for d in doms])
+        nbrs = [regions.ladj[regions.loff[x]:regions.loff[x + 1]] for x in range(r)]
+        want_bd = np.full(r, INTERIOR)
+        for x in range(r):
+            if want_dom[x] == -1:
+                want_bd[x] = 0
+                continue
+            if want_dom[x] == -2:
+                continue  # empty regions: no events; only passed through
+            seen, front, hops = {x}, [x], 0
+            while front and hops < INTERIOR:
+                if any(want_dom[y] not in (-2, want_dom[x]) for y in front):
+                    want_bd[x] = hops
+                    break
+                front = [int(z) for y in front for z in nbrs[y] if z not in seen]
+                seen.update(front)
+                hops += 1
+        dom, bd = np.zeros(r, np.int64), np.zeros(r, np.int64)
+        far = classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
+                               np.zeros(r, np.int64), INTERIOR)
+        np.testing.assert_array_equal(dom, want_dom)
+        full = want_dom != -2
+        np.testing.assert_array_equal(bd[full], want_bd[full])
+        assert far == int((want_bd[regions.lock_of] >= INTERIOR).sum())
 
 
 def test_lock_graph_regions_are_tree_nodes_partitioning_the_slots():
