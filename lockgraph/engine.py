@@ -30,8 +30,9 @@ from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
 from .state import State
-from .tree import (NTOP, bound_node, count_nodes, identity, node_bounds, pair_search,
-                   permute_mat3, permute_vec, resort, search_tasks, skeleton, subtree_bounds)
+from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
+                   pair_search, permute_mat3, permute_vec, resort, search_tasks, skeleton,
+                   subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 POLICIES = ("exact", "paper")
@@ -46,6 +47,14 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega):
     wrap(pos, vel, code, wp)
     if omega:
         kick_hill(pos, vel, omega, 0.5 * dt)
+
+
+def _anchor_and_bound(pos, anc, reach, ntop, nd, nbox, nreach, order):
+    """One thread's subtree: anchors (step-start positions) of its particles,
+    then the bounds of its nodes."""
+    lo, hi = int(ntop[nd, START]), int(ntop[nd, END])
+    K.copy_rows(anc[lo:hi], pos[lo:hi])
+    subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
 
 
 def _permute_some(arrays, perm, scratch):
@@ -407,14 +416,15 @@ class Engine:
         self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
                                    for k in range(min(t, len(arrays)))])
         identity(self.perm)
-        self._pmap(K.copy_rows, [(self.anc[q], self.pos[q]) for q in sl])
         nnodes = self.nnodes
         if self.threads == 1:
+            K.copy_rows(self.anc, self.pos)
             node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         else:
-            self._pmap(subtree_bounds, [(self.anc, self.reach, self.ntop, nd, self.nbox,
-                                         self.nreach, self.order[k])
-                                        for k, nd in enumerate(self.subroots)])
+            # each thread anchors its subtree's particles, then bounds its nodes
+            self._pmap(_anchor_and_bound, [(self.pos, self.anc, self.reach, self.ntop, nd,
+                                            self.nbox, self.nreach, self.order[k])
+                                           for k, nd in enumerate(self.subroots)])
             for nd in reversed(self.top_nodes):  # pre-order reversed: children first
                 bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)
         parts = search_tasks(self.ntop, half, self.threads)
