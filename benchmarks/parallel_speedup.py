@@ -3,6 +3,7 @@
     python benchmarks/parallel_speedup.py [--quick] [--cases ring,dish_marble]
                                           [--n ring=200000] [--steps 5] [--repeats 3]
                                           [--locks graph:4,grid] [--out results.json]
+                                          [--bed-code lammps] [--bed-steps 100]
 
 For each case the sequential engine (``threads=1``) and the threaded one
 (``threads=2``, ``policy="exact"``, each lock configuration) start from the same
@@ -29,6 +30,12 @@ N = 50,000, target >= 1.7x):
 * ``dish``: the settled bed alone (dish late), N = 10,000: dense, about 40
   events per grain per step, each well under a microsecond of work.
 * ``ring_late``: ring late (after 2 orbits) at N = 50,000, for comparison.
+* ``deep_bed``: the ``--paper-scale`` marble test's bed — 8,700 grains
+  settled by a DEM code (``--bed-code``, LAMMPS by default: ~7 min on one core
+  the first time, then cached), 7.5 mm dish, tc = 3e-5 s — with its 6 mm
+  marble dropped from 8 cm and run ``--bed-steps`` sequential steps (100: into
+  the bed) before the timing.  A dense bed without settling it by hard-sphere
+  dynamics; its size is fixed (``--n`` does not apply).
 """
 import argparse
 import json
@@ -48,7 +55,10 @@ from lockgraph.simulation import compile_kernels  # noqa: E402
 CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish_marble": ("dish_marble", "late", 10001, 2001),
          "dish": ("dish", "late", 10000, 2000),
-         "ring_late": ("ring", "late", 50000, 20000)}
+         "ring_late": ("ring", "late", 50000, 20000),
+         "deep_bed": ("dish_marble", "late", 8701, 8701)}
+DEEP_BED = {"cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
+DEEP_BED_DROP = 0.08  # m
 TARGET = 1.7
 
 
@@ -66,9 +76,38 @@ def parse_locks(text):
     return out
 
 
-def run_case(name, scene, state, n, steps, repeats, locks):
+def deep_bed(code, presteps):
+    """(state, physics, dt): the paper-scale marble test's DEM-settled bed with
+    the marble dropped into it and run ``presteps`` sequential steps."""
+    from lockgraph import marble_drop as M
+
+    p = scenarios.resolve_params(scenarios.read("dish_marble"), 8701, 1, None, DEEP_BED)
+    bed_params = {k: v for k, v in DEEP_BED.items() if k not in M.MARBLE_KEYS}
+    bed, sc, info = M.settled_bed(8700, 1, bed_params, code, 1e7, progress=say)
+    say(f"deep_bed: {code}-settled bed ({info['cache']}); the marble from "
+        f"{DEEP_BED_DROP:g} m, {presteps} sequential steps")
+    state = M.with_marble(bed, sc.physics, p["marble_radius"], p["marble_density"],
+                          DEEP_BED_DROP)
+    eng = Engine(state, sc.physics, sc.dt)
+    try:
+        for _ in range(presteps):
+            eng.step()
+        return eng.state(), sc.physics, sc.dt
+    finally:
+        eng.close()
+
+
+class _Scene:
+    def __init__(self, state, physics, dt):
+        self.state, self.physics, self.dt = state, physics, dt
+
+
+def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
     say(f"{name}: loading {scene} {state} N={n}")
-    sc = scenarios.load(scene, state, n=n, progress=say)
+    if name == "deep_bed":
+        sc = _Scene(*deep_bed(bed_code, bed_steps))
+    else:
+        sc = scenarios.load(scene, state, n=n, progress=say)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale in locks:
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "")
@@ -132,6 +171,10 @@ def main():
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--locks", default="graph:1.2,graph:4,grid", help="graph:SCALE, grid, grid3d, ...")
+    ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
+                    help="the DEM code that settles the deep_bed case's bed (lammps)")
+    ap.add_argument("--bed-steps", type=int, default=100,
+                    help="deep_bed: sequential steps of the falling marble before timing")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()
     locks = parse_locks(args.locks)
@@ -150,7 +193,8 @@ def main():
     results = {}
     for c in names:
         scene, state, _, _ = CASES[c]
-        results[c] = run_case(c, scene, state, sizes[c], args.steps, args.repeats, locks)
+        results[c] = run_case(c, scene, state, sizes[c], args.steps, args.repeats, locks,
+                              args.bed_code, args.bed_steps)
         print_case(c, results[c])
     print(f"\nTarget: 2-thread speedup >= {TARGET} (exact policy).")
     for c, res in results.items():
