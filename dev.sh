@@ -5,11 +5,12 @@
 #                     campaign, under 10 minutes) in report/index.html; ARGS go to
 #                     'lockgraph report' (e.g. --full, --scenes ring, --out DIR)
 #   ./dev.sh test     set up, then run the test and validation suites
-#   ./dev.sh bench [throughput|parallel|tables|rebound|dem|marble] [ARGS]
+#   ./dev.sh bench [throughput|parallel|tables|rebound|dem|marble|deep_marble] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
-#                     2-thread speedup, the paper's tables by replay, or speed
+#                     2-thread speedup, the paper's tables by replay, speed
 #                     against accuracy versus REBOUND or LAMMPS/LIGGGHTS
-#                     (settling dish; marble stop)
+#                     (settling dish; marble stop), or the paper-scale marble
+#                     drops one height at a time
 #   ./dev.sh setup    only set up: .venv with lockgraph[validation], LIGGGHTS, chromium
 #
 # Set-up is idempotent: a virtualenv in .venv (or $LOCKGRAPH_VENV) with the
@@ -79,7 +80,7 @@ case "$cmd" in
     bench)
         setup_python
         which="throughput"
-        case "${1:-}" in throughput|parallel|tables|rebound|dem|marble) which="$1"; shift ;; esac
+        case "${1:-}" in throughput|parallel|tables|rebound|dem|marble|deep_marble) which="$1"; shift ;; esac
         case "$which" in
             throughput) exec "$PY" benchmarks/throughput.py "$@" ;;
             parallel) exec "$PY" benchmarks/parallel_speedup.py "$@" ;;
@@ -87,8 +88,9 @@ case "$cmd" in
             rebound) exec "$PY" benchmarks/rebound_speed_accuracy.py "$@" ;;
             dem) exec "$PY" benchmarks/dem_speed_accuracy.py "$@" ;;
             marble) exec "$PY" benchmarks/marble_speed_accuracy.py "$@" ;;
+            deep_marble) exec "$PY" benchmarks/deep_marble.py "$@" ;;
         esac ;;
     *)
-        sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
+        sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
         [ "$cmd" = help ] || exit 2 ;;
 esac
