@@ -265,3 +265,31 @@ def test_options_are_checked():
         Engine(st, ph, 0.05, threads=2, lock="octree")
     with pytest.raises(InputError, match="^policy: unknown value"):
         Engine(st, ph, 0.05, threads=2, policy="optimistic")
+
+
+def test_lock_statistics_of_the_last_threaded_step(sequential):
+    """``lock_stats``: None before a threaded step; after one, the counts of
+    that step's regions, and the interior fraction — the particles whose
+    region is at least INTERIOR hops from another domain's (brute force over
+    the regions' classification)."""
+    from lockgraph.parallel import INTERIOR, classify_regions
+
+    sc = sequential("dish", "late")[0]
+    eng = Engine(sc.state, sc.physics, sc.dt, leaf_size=4, threads=2, lock="graph", scale=1.2)
+    try:
+        assert eng.lock_stats is None
+        eng.step()
+        stats = eng.lock_stats
+        regions, _ = eng._regions
+        assert stats["regions"] == regions.count
+        assert stats["max_degree"] == int(np.diff(regions.loff).max())
+        dlo, dhi = eng._domains()
+        r = regions.count
+        dom, bd = np.zeros(r, np.int64), np.zeros(r, np.int64)
+        classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
+                         np.zeros(r, np.int64), INTERIOR)
+        want = float((bd[regions.lock_of] >= INTERIOR).mean())
+        assert stats["interior_fraction"] == pytest.approx(want, abs=0)
+        assert 0.0 < want < 1.0
+    finally:
+        eng.close()
