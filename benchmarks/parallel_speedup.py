@@ -43,6 +43,7 @@ import os
 import statistics
 import sys
 import time
+from types import SimpleNamespace
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
@@ -57,7 +58,6 @@ CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish": ("dish", "late", 10000, 2000),
          "ring_late": ("ring", "late", 50000, 20000),
          "deep_bed": ("dish_marble", "late", 8701, 8701)}
-DEEP_BED = {"cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
 DEEP_BED_DROP = 0.08  # m
 TARGET = 1.7
 
@@ -77,13 +77,12 @@ def parse_locks(text):
 
 
 def deep_bed(code, presteps):
-    """(state, physics, dt): the paper-scale marble test's DEM-settled bed with
-    the marble dropped into it and run ``presteps`` sequential steps."""
+    """A scene-like namespace (state, physics, dt): the paper-scale marble test's
+    DEM-settled bed with the marble dropped into it and run ``presteps``
+    sequential steps."""
     from lockgraph import marble_drop as M
 
-    p = scenarios.resolve_params(scenarios.read("dish_marble"), 8701, 1, None, DEEP_BED)
-    bed_params = {k: v for k, v in DEEP_BED.items() if k not in M.MARBLE_KEYS}
-    bed, sc, info = M.settled_bed(8700, 1, bed_params, code, 1e7, progress=say)
+    bed, sc, p, info = M.deep_bed(code, progress=say)
     say(f"deep_bed: {code}-settled bed ({info['cache']}); the marble from "
         f"{DEEP_BED_DROP:g} m, {presteps} sequential steps")
     state = M.with_marble(bed, sc.physics, p["marble_radius"], p["marble_density"],
@@ -92,20 +91,15 @@ def deep_bed(code, presteps):
     try:
         for _ in range(presteps):
             eng.step()
-        return eng.state(), sc.physics, sc.dt
+        return SimpleNamespace(state=eng.state(), physics=sc.physics, dt=sc.dt)
     finally:
         eng.close()
-
-
-class _Scene:
-    def __init__(self, state, physics, dt):
-        self.state, self.physics, self.dt = state, physics, dt
 
 
 def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
     say(f"{name}: loading {scene} {state} N={n}")
     if name == "deep_bed":
-        sc = _Scene(*deep_bed(bed_code, bed_steps))
+        sc = deep_bed(bed_code, bed_steps)
     else:
         sc = scenarios.load(scene, state, n=n, progress=say)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}

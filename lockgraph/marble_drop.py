@@ -212,6 +212,21 @@ def uehara_depth(rho_ball, rho_grain, diameter, H, mu):
 
 
 MARBLE_KEYS = ("marble_radius", "marble_density", "marble_speed", "marble_gap")
+# The issue's deep bed (validation's --paper-scale case, benchmarks/deep_marble.py and
+# the parallel benchmark's deep_bed): 8,700 grains, 40 diameters deep in a 7.5 mm
+# dish, a 6 mm marble, lockgraph at tc = 3e-5 s
+DEEP_BED = {"n": 8701, "cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
+
+
+def deep_bed(code="lammps", seed=1, progress=None):
+    """The DEEP_BED bed settled by ``code`` (cached): (bed State, Scenario of
+    the block, resolved dish_marble parameters, settled_bed's info)."""
+    params = {k: v for k, v in DEEP_BED.items() if k != "n"}
+    p = scenarios.resolve_params(scenarios.read("dish_marble"), DEEP_BED["n"], seed, None,
+                                 params)
+    bed_params = {k: v for k, v in params.items() if k not in MARBLE_KEYS}
+    bed, sc, info = settled_bed(DEEP_BED["n"] - 1, seed, bed_params, code, progress=progress)
+    return bed, sc, p, info
 
 
 def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), heights=None,
@@ -246,9 +261,12 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
             row = {"seed": seed, "height": h}
             for code in ("lockgraph", against):
                 say(f"seed {seed}: marble from {h:g} m, {code}")
-                row[code] = penetration(bed, sc.physics, sc.dt, p["marble_radius"],
-                                        p["marble_density"], h, time, code, contact,
-                                        threads, ranks, say)
+                r = row[code] = penetration(bed, sc.physics, sc.dt, p["marble_radius"],
+                                            p["marble_density"], h, time, code, contact,
+                                            threads, ranks, say)
+                say(f"seed {seed}: marble from {h:g} m, {code}: depth {r['depth'] * 1e3:.3f} mm, "
+                    f"at rest after {r['rest_time']:.3f} s (nan: still moving), "
+                    f"{r['wall_s']:.0f} s wall")
             runs.append(row)
     per_height = []
     for h in heights:

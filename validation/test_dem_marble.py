@@ -19,7 +19,7 @@ import math
 
 import pytest
 
-from lockgraph.marble_drop import compare_marble
+from lockgraph.marble_drop import DEEP_BED, compare_marble
 
 CODES = ("lammps", "liggghts")
 # Depths agree within half a grain diameter: the marble comes to rest on
@@ -58,7 +58,7 @@ def test_marble_stops_like_in_dem(dem_code, code, marble_reports):
     assert res["reference_failures"] == {}
 
 
-PAPER = {"n": 8701, "cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
+PAPER = DEEP_BED  # 8,700 grains in a 7.5 mm dish, a 6 mm marble, tc = 3e-5 s
 HEIGHTS = (0.02, 0.08, 0.32)
 # Uehara et al. (2003) measured d ~ H^(1/3) for frictional grains.  These grains
 # are frictionless, and both codes find a weaker law: measured 2026-11-22 on the
