@@ -21,8 +21,8 @@ import math
 import numpy as np
 
 from . import kernels as K
+from ._jit import kernel
 from . import locks as L
-from .events import build_queue
 from .parallel import INTERIOR, Workers, classify_regions, cycles_per_second
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
@@ -41,11 +41,16 @@ STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "po
                 K.STALL: "stall"}
 
 
-def _finish(pos, vel, tl, dt, g, code, wp, omega):
-    """Step end for a slice of particles: real coordinates, wrap, second half kick."""
+@kernel
+def _finish(pos, vel, tl, dt, g, code, wp, omega, drift):
+    """Step end for a slice of particles: (with ``drift``) the rest of the way to
+    the step end, real coordinates, wrap, second half kick.  One compiled call,
+    so a worker thread does not go back to Python (and the GIL) between them."""
+    if drift:
+        K.drift_all(pos, vel, tl, dt)
     K.leave_frame(pos, vel, tl, dt, g)
     wrap(pos, vel, code, wp)
-    if omega:
+    if omega != 0.0:
         kick_hill(pos, vel, omega, 0.5 * dt)
 
 
@@ -346,15 +351,17 @@ class Engine:
                 kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
             raise
         sl = self._slices()
-        self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt) for q in sl])
-        if check_end:
+        if check_end:  # the overlaps at the step end, before leaving the frame
+            self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt)
+                                     for q in sl])
             ov = K.max_overlap(self.pos, self.rad, self.noff, self.nent, self.xhead, self.xent,
                                self.xnext, self._img_pos, self._img_vel, self.dt)
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
         self._pmap(_finish, [(self.pos[q], self.vel[q], self.tl[q], self.dt, ph.g,
-                              ph.domain.code, wp, hill.omega if hill is not None else 0.0)
+                              ph.domain.code, wp, hill.omega if hill is not None else 0.0,
+                              not check_end)
                              for q in sl])
         self._accumulate(st)
         self.last_events = float(st[K.S_POPS])
@@ -464,15 +471,22 @@ class Engine:
             if sequential:
                 K.init_events(parts, nbrs, evq, cfg, st)
             else:
+                # each thread: its domain's first events, then the domain's queue
+                dlo, dhi = self._domains()
+                q = tournament_size(int((dhi - dlo).max()))
+                dtour_t = np.full((self.threads, 2 * q), np.inf)
+                dtour_s = np.full((self.threads, 2 * q), -1, np.int32)
                 rows = np.zeros((self.threads, K.NSTAT))
-                self._pmap(K.init_range, [(parts, nbrs, evq, cfg, rows[k], q.start, q.stop)
-                                          for k, q in enumerate(self._slices())])
+                self._pmap(K.init_range, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
+                                           dtour_t[d], dtour_s[d])
+                                          for d in range(self.threads)])
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
             try:
                 if sequential:
                     status = self._events_sequential(st, img_pos, img_vel, full, half)
                 else:
-                    status = self._events_parallel(st, img_pos, img_vel, half, full)
+                    status = self._events_parallel(st, img_pos, img_vel, half, full,
+                                                   (dlo, dhi, dtour_t, dtour_s))
             except BaseException:
                 self._rollback()  # interrupted or a worker failed: undo the step
                 self.ctr[K.LCOUNT] = log_start
@@ -597,12 +611,15 @@ class Engine:
         dhi = np.array([r[1] for r in ranges], np.int64)
         return dlo, dhi
 
-    def _events_parallel(self, st, img_pos, img_vel, half, full):
+    def _events_parallel(self, st, img_pos, img_vel, half, full, queues):
+        """The step's events on the worker threads.  ``queues = (dlo, dhi,
+        dtour_t, dtour_s)``: the domains' slot ranges and their queues (built
+        with the first events)."""
         regions = self.build_locks(img_pos, half)
         locks = (regions.lock_of, regions.loff, regions.ladj)
         r = regions.count
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
-        dlo, dhi = self._domains()
+        dlo, dhi, dtour_t, dtour_s = queues
         dom = np.zeros(r, np.int64)
         bd = np.zeros(r, np.int64)
         far = classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
@@ -610,11 +627,6 @@ class Engine:
         # the statistics are worked out only when asked for (lock_stats): ~1 ms a step at N = 2e5
         self._regions = (regions, far / max(self.n, 1))
         self._lock_stats = None
-        q = tournament_size(int((dhi - dlo).max()))
-        dtour_t = np.full((self.threads, 2 * q), np.inf)
-        dtour_s = np.full((self.threads, 2 * q), -1, np.int32)
-        self._pmap(build_queue, [(dtour_t[d], dtour_s[d], self.evt, self.ids, self.hidden,
-                                  dlo[d], dhi[d]) for d in range(self.threads)])
         doms = (dom, bd, dlo, dhi, dtour_t, dtour_s)
         # how far an interior event may run ahead of the other domains: a few of
         # one domain's typical gaps between events (from the last step)

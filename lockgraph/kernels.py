@@ -430,24 +430,51 @@ def init_events(parts, nbrs, evq, cfg, st):
     largest relative overlap among the pairs (all particles are at the step
     start) into ``st[S_MAXOV]``.
     """
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    n = parts[0].shape[0]
+    _first_events(parts, nbrs, evq, cfg, st, 0, n)
+    build_queue(tour_t, tour_s, evt, parts[7], hidden, 0, n)
+
+
+@kernel
+def init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
+    """Threaded ``init_events`` for the slots lo..hi-1 of one domain, and that
+    domain's queue (``tour_t``, ``tour_s``).  Every pending event equals
+    ``init_events``'s: a pair across the range's edge is predicted by each
+    side, from its lower slot as ``init_events`` does, so the bits agree."""
+    evt, evp, evc, tour_t_, tour_s_, hidden = evq
+    _first_events(parts, nbrs, evq, cfg, st, lo, hi)
+    build_queue(tour_t, tour_s, evt, parts[7], hidden, lo, hi)
+
+
+@kernel(inline=True)
+def _first_events(parts, nbrs, evq, cfg, st, lo, hi):
+    """The first events of slots lo..hi-1 (offers reach only slots in the range)
+    and the largest overlap among their pairs with higher or equal slots."""
     pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
     noff, nent, xhead, xent, xnext, ctr = nbrs
     evt, evp, evc, tour_t, tour_s, hidden = evq
     par, ipar, img_pos, img_vel, img_all, parb = cfg
-    n = pos.shape[0]
     t_end = par[P_DT]
-    for i in range(n):
+    for i in range(lo, hi):
         evt[i] = INF
         evp[i] = NONE
         evc[i] = 0
-    for i in range(n):
+    for i in range(lo, hi):
         ri = rad[i]
         for k in range(noff[i], noff[i + 1]):
             e = nent[k]
             j = e >> 5
-            if j < i:
-                continue  # the pair was offered from j's list
             img = e & 31
+            if j < i:
+                if j >= lo:
+                    continue  # the pair was offered from j's list
+                # j is another domain's: the pair as init_events predicts it, from j
+                t = pair_time(pos, vel, j, i, 26 - img, img_pos, img_vel, rad[j] + ri, 0.0,
+                              t_end)
+                if t < INF:
+                    _offer(i, t, e, ids[j] * 32 + img, evt, evp, evc, ids, ncoll)
+                continue
             contact = ri + rad[j]
             ov = overlap_now(pos, i, j, img, img_pos, contact)
             if ov > st[S_MAXOV]:
@@ -455,10 +482,11 @@ def init_events(parts, nbrs, evq, cfg, st):
             t = pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, 0.0, t_end)
             if t < INF:
                 _offer(i, t, e, ids[j] * 32 + img, evt, evp, evc, ids, ncoll)
-                _offer(j, t, (i << 5) | (26 - img), ids[i] * 32 + 26 - img, evt, evp, evc,
-                       ids, ncoll)
+                if j < hi:
+                    _offer(j, t, (i << 5) | (26 - img), ids[i] * 32 + 26 - img, evt, evp, evc,
+                           ids, ncoll)
     if ipar[I_DISH] != 0:
-        for i in range(n):
+        for i in range(lo, hi):
             t = floor_time(pos, vel, tl, i, rad[i], par[P_G], 0.0, t_end)
             if t < evt[i]:
                 evt[i] = t
@@ -467,7 +495,6 @@ def init_events(parts, nbrs, evq, cfg, st):
             if t < evt[i]:
                 evt[i] = t
                 evp[i] = CYLINDER
-    build_queue(tour_t, tour_s, evt, ids, hidden, 0, n)
 
 
 @kernel(inline=True)
@@ -490,27 +517,6 @@ def process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
         return collide_pair(i, j, p & 31, t, parts, step, tree, nbrs, evq, jour, cfg, st,
                             locks), j
     return collide_wall(i, p, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks), -1
-
-
-@kernel
-def init_range(parts, nbrs, evq, cfg, st, lo, hi):
-    """Threaded variant of ``init_events`` for slots lo..hi-1: each particle's
-    first event (all its candidates, as ``predict``) and the largest overlap
-    among its pairs with higher slots.  The queue is built separately."""
-    pos, vel, rad, mass, tl, ncoll, tlast, ids = parts
-    noff, nent, xhead, xent, xnext, ctr = nbrs
-    par, ipar, img_pos, img_vel, img_all, parb = cfg
-    for i in range(lo, hi):
-        predict(i, 0.0, parts, nbrs, evq, cfg)
-        for k in range(noff[i], noff[i + 1]):
-            e = nent[k]
-            j = e >> 5
-            if j < i:
-                continue
-            img = e & 31
-            ov = overlap_now(pos, i, j, img, img_pos, rad[i] + rad[j])
-            if ov > st[S_MAXOV]:
-                st[S_MAXOV] = ov
 
 
 @kernel
