@@ -30,9 +30,9 @@ from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
 from .state import State
-from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
-                   pair_search, permute_mat3, permute_vec, resort, search_tasks, skeleton,
-                   subtree_bounds)
+from .tree import (AXIS, END, NTOP, START, axis_extent, bound_node, count_nodes, identity,
+                   node_bounds, pair_search, permute_mat3, permute_vec, rebuild_split, resort,
+                   search_tasks, skeleton, subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 POLICIES = ("exact", "paper")
@@ -60,6 +60,15 @@ def _anchor_and_bound(pos, anc, reach, ntop, nd, nbox, nreach, order):
     lo, hi = int(ntop[nd, START]), int(ntop[nd, END])
     K.copy_rows(anc[lo:hi], pos[lo:hi])
     subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
+
+
+@kernel
+def _reach_and_extent(pos, vel, rad, reach, par, extra, top, pos_all, perm, lo, hi, axis, ext):
+    """Step-start reaches of a part of the particles (sliced arrays) and, if
+    ``axis`` >= 0, the part's extent along ``axis`` (its slots lo..hi-1)."""
+    K.compute_reach(pos, vel, rad, reach, par, extra, top)
+    if axis >= 0:
+        axis_extent(pos_all, perm, lo, hi, axis, ext)
 
 
 def _permute_some(arrays, perm, scratch):
@@ -384,6 +393,7 @@ class Engine:
         """
         n = self.n
         sl = self._slices()
+        axis = -1  # >= 0: the root is re-split from the extents the parts measure
         if touching_only:
             self.reach[:] = self.rad
         else:
@@ -391,9 +401,23 @@ class Engine:
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra
-            tops = np.zeros((self.threads, 2))
-            self._pmap(K.compute_reach, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q],
-                                          self.par, extra, tops[k]) for k, q in enumerate(sl)])
+            parts = sl
+            if self.threads > 1 and int(self.ntop[0, 0]) >= 0:
+                # parts split where the root does, so that each also measures its
+                # extent along the root's axis for the root's re-split
+                m = int(self.ntop[int(self.ntop[0, 0]), END])
+                h = self.threads // 2
+                parts = ([slice(m * k // h, m * (k + 1) // h) for k in range(h)]
+                         + [slice(m + (n - m) * k // (self.threads - h),
+                                  m + (n - m) * (k + 1) // (self.threads - h))
+                            for k in range(self.threads - h)])
+                axis = int(self.ntop[0, AXIS])
+            tops = np.zeros((len(parts), 2))
+            ext = np.zeros((len(parts), 2))
+            self._pmap(_reach_and_extent, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q],
+                                            self.par, extra, tops[k], self.pos, self.perm,
+                                            q.start, q.stop, axis, ext[k])
+                                           for k, q in enumerate(parts)])
             top = np.sort(tops.ravel())[::-1]
             self.top[:] = top[:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
@@ -406,8 +430,18 @@ class Engine:
         # the nodes above the threads' subtrees first, then the subtrees in parallel
         fresh = self.since_build is None or self.since_build >= self.rebuild_every
         self.since_build = 0 if fresh else self.since_build + 1
-        if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
-                  self.vids[0], self.stacks[0]) < 0:
+        if not fresh and axis >= 0:
+            # the root's re-split from the parts' extents (the same result as
+            # rebuild_node's own two passes over all N), then the nodes below it
+            h = self.threads // 2
+            rebuild_split(self.pos, self.perm, self.ntop, 0, self.vslots[0], self.vids[0],
+                          ext[:h, 1].max(), ext[h:, 0].min())
+            for child in (int(self.ntop[0, 0]), int(self.ntop[0, 1])):
+                if resort(self.pos, self.perm, self.ntop, child, self.depth_split - 1, False,
+                          self.vslots[0], self.vids[0], self.stacks[0]) < 0:
+                    raise SimulationError("kD-tree deeper than its work stack")
+        elif resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh,
+                    self.vslots[0], self.vids[0], self.stacks[0]) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
         res = self._pmap(resort, [(self.pos, self.perm, self.ntop, nd, -1, fresh,
                                    self.vslots[k], self.vids[k], self.stacks[k])

@@ -228,8 +228,42 @@ def rebuild_node(pos, perm, ntop, nd, slots, ids):
         v = pos[perm[k], axis]
         if v < mn:
             mn = v
+    move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn)
+
+
+@kernel
+def rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn):
+    """``rebuild_node`` given the left half's maximum ``mx`` and the right
+    half's minimum ``mn`` along the node's axis (measured by the threads, each
+    on its part of the node's slots): the same result."""
+    move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn)
+
+
+@kernel
+def axis_extent(pos, perm, lo, hi, axis, out):
+    """out = (min, max) of pos[perm[k], axis] over the slots lo..hi-1."""
+    mn = np.inf
+    mx = -np.inf
+    for k in range(lo, hi):
+        v = pos[perm[k], axis]
+        if v < mn:
+            mn = v
+        if v > mx:
+            mx = v
+    out[0] = mn
+    out[1] = mx
+
+
+@kernel(inline=True)
+def move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn):
+    """The second half of ``rebuild_node``: move the particles that crossed."""
     if mx <= mn:
         return
+    left = ntop[nd, LEFT]
+    s = ntop[nd, START]
+    e = ntop[nd, END]
+    m = ntop[left, END]
+    axis = ntop[nd, AXIS]
     cap = slots.shape[0]
     nv = 0
     for k in range(s, m):
