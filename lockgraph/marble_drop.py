@@ -122,36 +122,65 @@ def with_marble(bed, physics, marble_radius, marble_density, height, gap=None):
                  np.concatenate([bed.mass, [mass]]))
 
 
-def stop(times, z, surface, marble_radius, grain_diameter):
-    """(penetration depth d (m) of the marble's bottom below the surface at the
-    end, time to rest (s after the drop; NaN if it was still moving in the last
-    tenth of the run))."""
+def stop(times, z, surface, marble_radius, grain_diameter, hold=None):
+    """(penetration depth d (m) of the marble's bottom below the surface, time
+    to rest (s after the drop; NaN if not at rest)).
+
+    ``hold`` None: the marble is at rest from the first sample after which its
+    height stays within REST_BAND grain diameters of its height at the end of
+    the run (NaN if that is only in the run's last tenth); d at the end.
+    ``hold`` (s): at rest from the first sample whose band the marble has kept
+    for ``hold`` s — the earliest sample m for which the samples since some
+    k, t_m - t_k >= hold, all lie within the band around z_m; d at sample m
+    (the same rule ``drop_lockgraph`` stops on).  NaN (and d at the end) if
+    that never happens."""
+    band = REST_BAND * grain_diameter
+    if hold is not None:
+        for m in range(len(times)):
+            k = held_since(times[:m + 1], z[:m + 1], band)
+            if times[m] - times[k] >= hold:
+                return float(surface - (z[m] - marble_radius)), float(times[k] - times[0])
+        return float(surface - (z[-1] - marble_radius)), math.nan
     d = surface - (z[-1] - marble_radius)
-    moving = np.flatnonzero(~(np.abs(z - z[-1]) <= REST_BAND * grain_diameter))
-    k = int(moving[-1]) + 1 if moving.size else 0
+    k = held_since(times, z, band)
     if k >= len(times) - max(1, len(times) // 10):
         return float(d), math.nan
     return float(d), float(times[k] - times[0])
+
+
+def held_since(times, z, band):
+    """Index of the first sample from which every later one lies within ``band``
+    (m) of the last sample's height."""
+    z = np.asarray(z)
+    moving = np.flatnonzero(~(np.abs(z - z[-1]) <= band))
+    return int(moving[-1]) + 1 if moving.size else 0
 
 
 PROGRESS_EVERY = 30.0  # s of wall time between progress lines of a long drop
 
 
 def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=4.0,
-                   progress=None):
+                   progress=None, rest=None):
     """The marble (last particle) through a lockgraph run: (times, z, vz, info).
-    ``progress(msg)``, if given, hears about a long run every PROGRESS_EVERY s."""
+    ``progress(msg)``, if given, hears about a long run every PROGRESS_EVERY s.
+    ``rest = (band, hold)``: stop before ``duration`` once the marble's height
+    has stayed within ``band`` (m) of its current value for ``hold`` s (see
+    ``stop``); info["stopped_at_rest"] says whether it did."""
     sim = Simulation(state, physics, dt=dt, threads=threads, lock=lock, scale=scale)
     every = max(1, int(round(SAMPLE_EVERY / dt)))
     times, z, vz = [state.time], [state.pos[-1, 2]], [state.vel[-1, 2]]
     t_start = state.time
     last = _time.perf_counter()
+    at_rest = False
     for _ in range(max(1, int(round(duration / (every * dt))))):
         sim.run(every)
         st = sim.state
         times.append(st.time)
         z.append(st.pos[-1, 2])
         vz.append(st.vel[-1, 2])
+        if rest is not None and times[-1] - times[held_since(times, z, rest[0])] >= rest[1]:
+            at_rest = True  # the run's only use was the stop: the rest costs collisions
+            break
         if progress is not None and _time.perf_counter() - last >= PROGRESS_EVERY:
             last = _time.perf_counter()
             progress(f"lockgraph: {st.time - t_start:.4f} of {duration:g} s simulated, "
@@ -162,6 +191,7 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
     info = {"wall_s": sim.wall_s, "collisions": stats["collisions"],
             "max_overlap": stats["max_overlap"], "threads": stats["threads"],
             "violations": stats["violations"], "repairs": stats["repairs"],
+            "stopped_at_rest": at_rest, "simulated_s": final.time - t_start,
             # every particle's final state: a threaded run must reproduce it bit for bit
             "state_hash": final.sha256()}
     sim.close()
@@ -180,19 +210,23 @@ def drop_dem(state, physics, code, duration, contact, ranks=1, progress=None):
 
 def penetration(bed, physics, dt, marble_radius, marble_density, height, duration,
                 code="lockgraph", contact=None, threads=1, ranks=1, progress=None,
-                lock="graph", scale=4.0):
+                lock="graph", scale=4.0, hold=None):
     """Drop the marble from ``height`` into ``bed`` with ``code`` ("lockgraph",
     "lammps" or "liggghts"); returns a dict: depth (m), rest_time (s), H = height
-    + depth (m), impact_speed (m/s), wall_s, info."""
+    + depth (m), impact_speed (m/s), wall_s, info.  ``hold`` (s): the rest rule
+    of ``stop``; lockgraph then stops as soon as it is met (the DEM code runs
+    ``duration``, and the same rule is read off its trajectory)."""
     surface = DO.bed_height(bed.pos, bed.radius, physics.domain.radius)
     state = with_marble(bed, physics, marble_radius, marble_density, height)
+    grain_d = 2.0 * float(np.median(bed.radius))
     if code == "lockgraph":
+        rest_rule = None if hold is None else (REST_BAND * grain_d, hold)
         t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads, lock, scale,
-                                        progress)
+                                        progress, rest_rule)
     else:
         t, z, vz, info = drop_dem(state, physics, code, duration,
                                   contact or dem.Contact("hertz", 1e7, 20), ranks, progress)
-    depth, rest = stop(t, z, surface, marble_radius, 2.0 * float(np.median(bed.radius)))
+    depth, rest = stop(t, z, surface, marble_radius, grain_d, hold)
     return {"code": code, "height": height, "depth": depth, "rest_time": rest,
             "H": height + depth, "impact_speed": math.sqrt(2 * physics.g * height),
             "surface": surface, "wall_s": info["wall_s"], "info": info,
@@ -216,6 +250,13 @@ MARBLE_KEYS = ("marble_radius", "marble_density", "marble_speed", "marble_gap")
 # the parallel benchmark's deep_bed): 8,700 grains, 40 diameters deep in a 7.5 mm
 # dish, a 6 mm marble, lockgraph at tc = 3e-5 s
 DEEP_BED = {"n": 8701, "cylinder_radius": 0.0075, "marble_radius": 0.003, "tc": 3e-5}
+# Its drops end at rest by the ``hold`` rule of ``stop``: 0.04 s within 0.05 d,
+# i.e. a marble creeping slower than 1.25 mm/s counts as at rest.  A drop's
+# cost to lockgraph grows with its length (the bed under the marble compacts:
+# ~8e9 collisions per simulated second over the first 0.1 s, ~3e10 by 0.15 s,
+# measured 2026-11-30), and with 0.1 s drops it came to rest after 0.04-0.064 s
+# (2, 8, 32 cm), so the rule ends its drops near 0.1 s instead of 0.2 s.
+DEEP_REST_HOLD = 0.04
 
 
 def deep_bed(code="lammps", seed=1, progress=None):
@@ -231,7 +272,7 @@ def deep_bed(code="lammps", seed=1, progress=None):
 
 def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), heights=None,
                    time=0.15, stiffness=1e7, dt_fraction=20.0, params=None, threads=1, ranks=1,
-                   depth_tol=0.5, rest_tol=0.08, progress=None):
+                   depth_tol=0.5, rest_tol=0.08, progress=None, rest_hold=None):
     """Drop the scene's marble into a settled bed with lockgraph and ``against``
     for each seed (one bed each, settled by ``against``) and drop height.
 
@@ -239,11 +280,15 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
     v^2 / 2g.  Agreement: per height, the seed-mean depths within ``depth_tol``
     grain diameters and the mean times to rest within ``rest_tol`` s (see
     validation/test_dem_marble.py for the measured spreads behind the defaults).
+    ``rest_hold`` (s): the rest rule of ``stop`` for both codes; lockgraph's
+    drops end as soon as it is met (``time`` is then the longest drop).
     Returns the report dict (the shape of the other comparisons)."""
     if scene != "dish_marble":
         raise InputError("scene", f"the marble comparison runs on dish_marble, got {scene!r}")
     if against not in dem.CODES:
         raise InputError("against", f"unknown DEM code {against!r}; one of {', '.join(dem.CODES)}")
+    if rest_hold is not None and not (math.isfinite(rest_hold) and rest_hold > 0):
+        raise InputError("rest_hold", f"must be a positive time in s or None, got {rest_hold!r}")
     seeds = [int(s) for s in seeds]
     say = progress or (lambda msg: None)
     p = scenarios.resolve_params(scenarios.read(scene), n, seeds[0], None, params)
@@ -263,9 +308,10 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
                 say(f"seed {seed}: marble from {h:g} m, {code}")
                 r = row[code] = penetration(bed, sc.physics, sc.dt, p["marble_radius"],
                                             p["marble_density"], h, time, code, contact,
-                                            threads, ranks, say)
+                                            threads, ranks, say, hold=rest_hold)
                 say(f"seed {seed}: marble from {h:g} m, {code}: depth {r['depth'] * 1e3:.3f} mm, "
                     f"at rest after {r['rest_time']:.3f} s (nan: still moving), "
+                    f"{r['info'].get('simulated_s', time):.3f} s simulated, "
                     f"{r['wall_s']:.0f} s wall")
             runs.append(row)
     per_height = []
@@ -293,6 +339,7 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
         "reference_settings": {"code": dem.code_version(against), "model": "hertz",
                                "stiffness": stiffness, "dt_fraction": dt_fraction},
         "tolerances": {"depth_grain_diameters": depth_tol, "rest_time_s": rest_tol},
+        "rest_rule": {"band_grain_diameters": REST_BAND, "hold_s": rest_hold},
         "per_height": per_height,
         "uehara_exponent": exps,
         "agree": all(o["depth_agree"] and o["rest_agree"] for o in per_height),

@@ -90,6 +90,45 @@ def test_marble_stop_depth_and_rest():
     assert math.isnan(stop(t, moving, 0.015, 0.002, 1e-3)[1])
 
 
+def test_marble_rest_by_the_hold_rule():
+    """hold: at rest from the first sample whose band (0.05 d) is then kept for
+    the hold; depth where the hold ends.  A slow creep (0.5 mm/s < 0.05 d /
+    0.04 s) is rest; a creep that leaves the band before the hold is not."""
+    t = np.linspace(0, 0.2, 201)
+    z = np.where(t < 0.04, 0.02 - 0.1 * t, 0.016)
+    d, rest = stop(t, z, 0.015, 0.002, 1e-3, hold=0.03)
+    assert rest == pytest.approx(0.04, abs=0.0011)
+    assert d == pytest.approx(0.015 - 0.014)
+    creep = np.where(t < 0.04, 0.02 - 0.1 * t, 0.016 - 5e-4 * (t - 0.04))
+    d, rest = stop(t, creep, 0.015, 0.002, 1e-3, hold=0.04)
+    assert rest == pytest.approx(0.04, abs=0.0011)
+    assert d == pytest.approx(0.001 + 5e-4 * 0.08, rel=0.02)  # at t = 0.08 s
+    # the end-of-run rule dates rest to where the creep comes within 0.05 d of
+    # the height at 0.2 s: 0.1 s later
+    assert stop(t, creep, 0.015, 0.002, 1e-3)[1] == pytest.approx(0.1, abs=0.0011)
+    fast = np.where(t < 0.04, 0.02 - 0.1 * t, 0.016 - 2e-3 * (t - 0.04))
+    d, rest = stop(t, fast, 0.015, 0.002, 1e-3, hold=0.04)
+    assert math.isnan(rest) and d == pytest.approx(0.015 - (fast[-1] - 0.002))
+
+
+def test_a_marble_drop_ends_at_rest_by_the_hold_rule():
+    """drop_lockgraph with rest=(band, hold) stops at the first sample where
+    ``stop``'s hold rule is met, and ``stop`` finds its rest there."""
+    from lockgraph import marble_drop as M
+    from lockgraph import scenarios
+
+    sc = scenarios.load("dish", "early", n=60, params={"cylinder_radius": 0.003})
+    state = M.with_marble(sc.state, sc.physics, 0.001, 2500.0, 0.01)
+    band = 1e-3  # wide: the marble is "at rest" as soon as it has moved < 1 mm for 3 ms
+    t, z, vz, info = M.drop_lockgraph(state, sc.physics, sc.dt, 0.05, rest=(band, 0.003))
+    assert info["stopped_at_rest"] and t[-1] - t[0] < 0.05
+    assert t[-1] - t[M.held_since(t, z, band)] >= 0.003
+    for m in range(len(t) - 1):  # not met before
+        assert t[m] - t[M.held_since(t[:m + 1], z[:m + 1], band)] < 0.003
+    d, rest = M.stop(t, z, 0.0, 0.001, band / M.REST_BAND, hold=0.003)
+    assert rest == pytest.approx(t[M.held_since(t, z, band)] - t[0])
+
+
 def test_uehara_exponent_recovers_one_third():
     H = np.array([0.02, 0.08, 0.32])
     d = np.array([uehara_depth(2500, 2330, 0.006, h, 0.5) for h in H])
@@ -120,3 +159,12 @@ def test_a_long_marble_drop_reports_progress(monkeypatch):
     t, z, vz, info = M.drop_lockgraph(state, sc.physics, sc.dt, 0.003, progress=heard.append)
     assert len(heard) == len(t) - 1 == 3
     assert heard[-1].startswith("lockgraph: 0.0030 of 0.003 s simulated")
+
+
+@pytest.mark.parametrize("hold", [0.0, -0.01, float("nan")])
+def test_a_bad_rest_hold_is_refused_by_name(hold):
+    from lockgraph.errors import InputError
+    from lockgraph.marble_drop import compare_marble
+
+    with pytest.raises(InputError, match="rest_hold"):
+        compare_marble(against="lammps", n=101, rest_hold=hold)
