@@ -73,6 +73,12 @@ class TestLockRegions:
                 edges.add((r, int(x)))
         assert all((b, a) in edges for a, b in edges)
 
+    def test_each_adjacency_list_lists_a_region_once(self, case):
+        *_, regions, domain = case
+        for r in range(regions.count):
+            lst = regions.ladj[regions.loff[r]:regions.loff[r + 1]]
+            assert len(np.unique(lst)) == len(lst)
+
     def test_pairs_that_may_meet_are_covered(self, case):
         name, lock, scale, eng, regions, domain = case
         a, b = brute_pairs(eng, domain)
@@ -162,3 +168,28 @@ def test_grid_neighbours():
     assert set(regions.degrees()) == {8}
     eng, regions, domain = step_structures("gas", "grid3d", None)
     assert set(regions.degrees()) == {26}
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_csr_from_edges_with_duplicates(seed):
+    """locks._csr against a set of edges: every edge in both lists, each once,
+    nothing else; regions without edges get empty lists."""
+    from lockgraph.locks import _csr
+
+    rng = np.random.default_rng(seed)
+    nreg = 50
+    u = rng.integers(0, nreg, 400)
+    v = rng.integers(0, nreg, 400)
+    keep = u != v
+    u, v = u[keep], v[keep]
+    u = np.concatenate([u, v[:50]])  # duplicates, some reversed
+    v = np.concatenate([v, u[:50]])
+    loff, ladj = _csr(nreg, u, v)
+    want = {r: set() for r in range(nreg)}
+    for a, b in zip(u, v):
+        want[int(a)].add(int(b))
+        want[int(b)].add(int(a))
+    for r in range(nreg):
+        got = ladj[loff[r]:loff[r + 1]].tolist()
+        assert len(got) == len(set(got)) and set(got) == want[r]
+    assert loff[-1] == len(ladj) == sum(len(s) for s in want.values())

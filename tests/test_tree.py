@@ -185,3 +185,34 @@ def test_random_point_sets(n, seed, spread):
 def test_single_particle_has_no_pairs():
     pos = np.zeros((1, 3))
     assert tree_pairs(pos, np.ones(1), np.ones(1), PeriodicCube(10.0)) == []
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("cap", [4096, 3])
+def test_root_resplit_from_the_halves_extents_equals_rebuild_node(seed, cap):
+    """The threaded engine re-splits the root from extents its threads measured
+    (``axis_extent`` on each half, ``rebuild_split``): the same permutation as
+    ``rebuild_node``'s own passes, whether the crossers fit the work buffers or
+    (cap 3) the root falls back to a full selection."""
+    from lockgraph.tree import (AXIS, END, LEFT, axis_extent, count_nodes, rebuild_split,
+                                resort)
+    rng = np.random.default_rng(seed)
+    n = 500
+    pos = rng.uniform(-1, 1, (n, 3))
+    ntop = np.zeros((count_nodes(n, 8), 6), np.int64)
+    perm = np.arange(n, dtype=np.int32)
+    assert build(pos, 8, perm, ntop, np.zeros(256, np.int64)) > 0
+    pos = pos + rng.normal(0, 0.05, pos.shape)  # a step later: some cross the root's plane
+    m = int(ntop[int(ntop[0, LEFT]), END])
+    axis = int(ntop[0, AXIS])
+    ext = np.zeros((2, 2))
+    axis_extent(pos, perm, 0, m, axis, ext[0])
+    axis_extent(pos, perm, m, n, axis, ext[1])
+    assert ext[0, 1] > ext[1, 0]  # crossers exist
+    slots, ids = np.zeros(cap, np.int64), np.zeros(cap, np.int32)
+    by_node = perm.copy()
+    resort(pos, by_node, ntop, 0, 1, False, slots, ids, np.zeros(256, np.int64))
+    by_split = perm.copy()
+    rebuild_split(pos, by_split, ntop, 0, slots, ids, ext[0, 1], ext[1, 0])
+    assert np.array_equal(by_node, by_split)
+    assert pos[by_split[:m], axis].max() <= pos[by_split[m:], axis].min()
