@@ -403,14 +403,10 @@ class Engine:
             self.par[K.P_EXTRA] = extra
             parts = sl
             if self.threads > 1 and int(self.ntop[0, 0]) >= 0:
-                # parts split where the root does, so that each also measures its
-                # extent along the root's axis for the root's re-split
-                m = int(self.ntop[int(self.ntop[0, 0]), END])
-                h = self.threads // 2
-                parts = ([slice(m * k // h, m * (k + 1) // h) for k in range(h)]
-                         + [slice(m + (n - m) * k // (self.threads - h),
-                                  m + (n - m) * (k + 1) // (self.threads - h))
-                            for k in range(self.threads - h)])
+                # the threads' subtrees, each inside one half of the root, also
+                # measure their extent along the root's axis for its re-split
+                parts = [slice(int(self.ntop[nd, START]), int(self.ntop[nd, END]))
+                         for nd in self.subroots]
                 axis = int(self.ntop[0, AXIS])
             tops = np.zeros((len(parts), 2))
             ext = np.zeros((len(parts), 2))
@@ -433,9 +429,10 @@ class Engine:
         if not fresh and axis >= 0:
             # the root's re-split from the parts' extents (the same result as
             # rebuild_node's own two passes over all N), then the nodes below it
-            h = self.threads // 2
+            m = int(self.ntop[int(self.ntop[0, 0]), END])
+            left = np.array([q.stop <= m for q in parts])
             rebuild_split(self.pos, self.perm, self.ntop, 0, self.vslots[0], self.vids[0],
-                          ext[:h, 1].max(), ext[h:, 0].min())
+                          ext[left, 1].max(), ext[~left, 0].min())
             for child in (int(self.ntop[0, 0]), int(self.ntop[0, 1])):
                 if resort(self.pos, self.perm, self.ntop, child, self.depth_split - 1, False,
                           self.vslots[0], self.vids[0], self.stacks[0]) < 0:

@@ -228,15 +228,7 @@ def rebuild_node(pos, perm, ntop, nd, slots, ids):
         v = pos[perm[k], axis]
         if v < mn:
             mn = v
-    move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn)
-
-
-@kernel
-def rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn):
-    """``rebuild_node`` given the left half's maximum ``mx`` and the right
-    half's minimum ``mn`` along the node's axis (measured by the threads, each
-    on its part of the node's slots): the same result."""
-    move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn)
+    rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn)
 
 
 @kernel
@@ -255,8 +247,11 @@ def axis_extent(pos, perm, lo, hi, axis, out):
 
 
 @kernel(inline=True)
-def move_crossers(pos, perm, ntop, nd, slots, ids, mx, mn):
-    """The second half of ``rebuild_node``: move the particles that crossed."""
+def rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn):
+    """``rebuild_node`` given the left half's maximum ``mx`` and the right
+    half's minimum ``mn`` along the node's axis (its own two passes, or the
+    threads' ``axis_extent`` over their parts of the node's slots): moves the
+    particles that crossed."""
     if mx <= mn:
         return
     left = ntop[nd, LEFT]
