@@ -69,12 +69,15 @@ def say(msg):
 
 
 def parse_locks(text):
+    """[(kind, scale, merge_far)] from 'graph:4,graph:4:unmerged,grid'."""
     out = []
     for item in text.split(","):
-        kind, _, scale = item.partition(":")
-        if kind not in ("graph", "grid", "grid3d"):
-            raise SystemExit(f"--locks: unknown lock {kind!r} (graph:SCALE, grid, grid3d)")
-        out.append((kind, float(scale) if scale else 4.0))
+        kind, _, rest = item.partition(":")
+        scale, _, flag = rest.partition(":")
+        if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged"):
+            raise SystemExit(f"--locks: unknown lock {item!r} "
+                             "(graph:SCALE, graph:SCALE:unmerged, grid, grid3d)")
+        out.append((kind, float(scale) if scale else 4.0, flag != "unmerged"))
     return out
 
 
@@ -105,10 +108,12 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     else:
         sc = scenarios.load(scene, state, n=n, progress=say)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
-    for kind, scale in locks:
-        label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "")
+    for kind, scale, merge in locks:
+        label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
+            "" if merge else " unmerged")
         engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, lock=kind,
                                 scale=scale, policy="exact")
+        engines[label].merge_far = merge
     try:
         for eng in engines.values():
             eng.step()
@@ -156,14 +161,16 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
 def print_case(name, res):
     print(f"\n{name}: {res['scene']} {res['state']}, N = {res['n']}, dt = {res['dt']:g} s, "
           f"{res['steps']} steps x {res['repeats']} repeats")
-    print(f"  {'engine':20s} {'ms/step':>9s} {'speedup':>8s} {'(median)':>9s} {'(paired)':>9s} "
+    print(f"  {'engine':29s} {'ms/step':>9s} {'speedup':>8s} {'(median)':>9s} {'(paired)':>9s} "
           f"{'events/step':>12s} {'concurrency':>12s} {'viol.':>6s} {'repairs':>8s} "
-          f"{'identical':>10s}")
+          f"{'identical':>10s} {'regions':>8s} {'interior':>9s}")
     for label, r in res["runs"].items():
-        print(f"  {label:20s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
+        lk = r.get("locks", {})
+        print(f"  {label:29s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
               f"{r['speedup_median']:9.2f} {r['speedup_paired']:9.2f} {r['events_per_step']:12.0f} "
               f"{r['mean_concurrency']:12.2f} {r['violations']:6d} {r['repairs']:8d} "
-              f"{str(r['identical']):>10s}")
+              f"{str(r['identical']):>10s} {lk.get('regions', ''):>8} "
+              f"{lk.get('interior_fraction', float('nan')):9.2f}")
 
 
 def main():

@@ -36,10 +36,43 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2, search_tasks
 KINDS = ("graph", "grid", "grid3d")
 
 
+@kernel(inline=True)
+def _far_from_others(nbox, nd, start, end, dlo, dhi, dbox, imgs, margin):
+    """Does node nd lie in one domain, more than ``margin`` from the box of every
+    other domain and of each of their periodic images?"""
+    ndom = dlo.shape[0]
+    own = -1
+    for e in range(ndom):
+        if dlo[e] <= start and end <= dhi[e]:
+            own = e
+    if own < 0:
+        return False
+    m2 = margin * margin
+    for e in range(ndom):
+        if e == own or dhi[e] <= dlo[e]:
+            continue
+        for k in range(imgs.shape[0]):
+            d2 = 0.0
+            for ax in range(3):
+                o = imgs[k, ax]
+                g = nbox[nd, ax] - (dbox[e, ax + 3] + o)
+                h = (dbox[e, ax] + o) - nbox[nd, ax + 3]
+                if h > g:
+                    g = h
+                if g > 0.0:
+                    d2 += g * g
+            if d2 <= m2:
+                return False
+    return True
+
+
 @kernel
-def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack):
+def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack, dlo, dhi, dbox, imgs, margin):
     """Top-down: lockid[nd] = region index for lock nodes, -1 above them.
 
+    With domains (``dlo``/``dhi`` slot ranges, ``dbox`` their boxes, ``imgs``
+    the periodic image offsets; empty arrays for none), a node of one domain
+    farther than ``margin`` from every other domain is a lock node too.
     Returns the number of lock nodes (regions) or -1 if the stack was short.
     """
     nl = 0
@@ -49,7 +82,9 @@ def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack):
         sp -= 1
         nd = stack[sp]
         size = max(nbox[nd, 3] - nbox[nd, 0], nbox[nd, 4] - nbox[nd, 1], nbox[nd, 5] - nbox[nd, 2])
-        if ntop[nd, LEFT] < 0 or size < scale * nreach[nd]:
+        if ntop[nd, LEFT] < 0 or size < scale * nreach[nd] or (
+                dlo.shape[0] > 1 and _far_from_others(nbox, nd, ntop[nd, START], ntop[nd, END],
+                                                      dlo, dhi, dbox, imgs, margin)):
             lockid[nd] = nl
             nl += 1
             continue
@@ -225,14 +260,21 @@ class LockRegions:
 
 
 def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n, pmap=None,
-               parts=1):
+               parts=1, domains=None):
     """The lock graph of a built tree (node bounds and reaches filled in).
 
     ``pmap(fn, arglists)``, if given, runs the edge search in ``parts`` pieces
-    on worker threads."""
+    on worker threads.  ``domains = (dlo, dhi, dbox, images, margin)``, if
+    given, also makes a lock node of every node that lies in one domain farther
+    than ``margin`` from all the others (see ``far_merged_graph``)."""
     lockid = np.full(nnodes, -1, np.int32)
     stack = np.zeros(256, np.int64)
-    nl = _mark_lock_nodes(ntop, nbox, nreach, float(scale), lockid, stack)
+    if domains is None:
+        no = np.zeros(0, np.int64)
+        domains = (no, no, np.zeros((0, 6)), np.zeros((0, 3)), 0.0)
+    dlo, dhi, dbox, imgs, margin = domains
+    nl = _mark_lock_nodes(ntop, nbox, nreach, float(scale), lockid, stack, dlo, dhi, dbox, imgs,
+                          float(margin))
     if nl < 0:
         raise RuntimeError("lock-node search deeper than its stack")
     lock_of = np.zeros(n, np.int32)

@@ -9,6 +9,7 @@ for every scene and lock structure.
 import numpy as np
 import pytest
 
+from lockgraph import locks as L
 from lockgraph import scenarios
 from lockgraph.engine import Engine
 from lockgraph.parallel import INTERIOR, classify_regions
@@ -23,9 +24,15 @@ SCENES = {
 }
 LOCKS = [("graph", 1.2), ("graph", 2.0), ("graph", 4.0), ("graph", 6.0), ("graph", 8.0),
          ("grid", None), ("grid3d", None)]
+# the lock graph with the regions far from the other domains merged, as the
+# threaded exact policy builds it: 2 and 4 domains, the engine's own margin
+# ("auto") and margins of 0 and 1 largest reach, which merge much more (every
+# node of one domain whose box stays clear of the others' boxes)
+MERGED = [("graph", 4.0, (2, "auto")), ("graph", 1.2, (2, 0.0)), ("graph", 4.0, (2, 1.0)),
+          ("graph", 2.0, (4, 0.0))]
 
 
-def step_structures(name, lock, scale, steps=3):
+def step_structures(name, lock, scale, merge=None, steps=3):
     cfg = SCENES[name]
     sc = scenarios.load(name, n=cfg["n"], params=cfg["params"])
     eng = Engine(sc.state, sc.physics, sc.dt, lock=lock, scale=scale or 4.0, leaf_size=4)
@@ -33,7 +40,17 @@ def step_structures(name, lock, scale, steps=3):
         eng.step()
     img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
     eng._setup(img_pos, img_vel, half)
-    return eng, eng.build_locks(img_pos, half), sc.physics.domain
+    if merge is None:
+        return eng, eng.build_locks(img_pos, half), sc.physics.domain
+    ndom, margin = merge
+    dlo, dhi = eng._domains(ndom)
+    far = eng._far_domains(scale, img_pos, dlo, dhi, full)
+    if margin != "auto":
+        far = far[:4] + (margin * float(eng.nreach[0]),)
+    regions = L.lock_graph(eng.ntop, eng.nbox, eng.nreach, eng.nnodes, half, img_pos, scale,
+                           eng.n, domains=far)
+    regions.merged_from = (dlo, dhi, far, eng.build_locks(img_pos, half))
+    return eng, regions, sc.physics.domain
 
 
 def brute_pairs(eng, domain):
@@ -50,11 +67,16 @@ def brute_pairs(eng, domain):
     return np.concatenate(a_all), np.concatenate(b_all)
 
 
-@pytest.fixture(scope="module", params=[(s, lk, sc) for s in SCENES for lk, sc in LOCKS],
-                ids=lambda p: f"{p[0]}-{p[1]}-{p[2]}")
+def _case_id(p):
+    merged = "" if p[3] is None else f"-merged{p[3][0]}d-{p[3][1]}"
+    return f"{p[0]}-{p[1]}-{p[2]}{merged}"
+
+
+@pytest.fixture(scope="module", params=[(s, lk, sc, None) for s in SCENES for lk, sc in LOCKS]
+                + [(s, lk, sc, m) for s in SCENES for lk, sc, m in MERGED], ids=_case_id)
 def case(request):
-    name, lock, scale = request.param
-    eng, regions, domain = step_structures(name, lock, scale)
+    name, lock, scale, merge = request.param
+    eng, regions, domain = step_structures(name, lock, scale, merge)
     return name, lock, scale, eng, regions, domain
 
 
@@ -193,3 +215,64 @@ def test_csr_from_edges_with_duplicates(seed):
         got = ladj[loff[r]:loff[r + 1]].tolist()
         assert len(got) == len(set(got)) and set(got) == want[r]
     assert loff[-1] == len(ladj) == sum(len(s) for s in want.values())
+
+
+@pytest.fixture(scope="module", params=[(s, lk, sc, m) for s in SCENES for lk, sc, m in MERGED],
+                ids=_case_id)
+def merged_case(request):
+    name, lock, scale, merge = request.param
+    eng, regions, domain = step_structures(name, lock, scale, merge)
+    return name, merge, eng, regions
+
+
+def _node_of_region(eng, regions):
+    """Each region's tree node (regions are tree nodes: the node whose slot range
+    is exactly the region's slots)."""
+    out = []
+    for r in range(regions.count):
+        slots = np.flatnonzero(regions.lock_of == r)
+        nd = np.flatnonzero((eng.ntop[:eng.nnodes, 2] == slots.min())
+                            & (eng.ntop[:eng.nnodes, 3] == slots.max() + 1))
+        assert len(slots) == slots.max() + 1 - slots.min() and len(nd) >= 1
+        out.append(nd[0])
+    return out
+
+
+class TestMergedFarRegions:
+    def test_a_coarsening_of_the_lock_graph(self, merged_case):
+        """Every region of the paper's lock graph lies within one merged region,
+        and merged regions are tree nodes too."""
+        name, merge, eng, regions = merged_case
+        dlo, dhi, far, plain = regions.merged_from
+        for r in range(plain.count):
+            assert len(np.unique(regions.lock_of[plain.lock_of == r])) == 1
+        _node_of_region(eng, regions)
+
+    def test_only_far_nodes_of_one_domain_are_merged(self, merged_case):
+        """A region that is not a lock node of the paper's graph holds the
+        particles of one domain and its box is farther than the margin from
+        every other domain's box and their periodic images."""
+        name, merge, eng, regions = merged_case
+        dlo, dhi, far, plain = regions.merged_from
+        _, _, dbox, imgs, margin = far
+        plain_nodes = set(_node_of_region(eng, plain))
+        owner = np.searchsorted(dhi, np.arange(eng.n), side="right")
+        for r, nd in enumerate(_node_of_region(eng, regions)):
+            if nd in plain_nodes:
+                continue
+            doms = np.unique(owner[regions.lock_of == r])
+            assert len(doms) == 1
+            box = eng.nbox[nd]
+            for e in range(len(dlo)):
+                if e == doms[0]:
+                    continue
+                for o in imgs:
+                    lo, hi = dbox[e, :3] + o, dbox[e, 3:] + o
+                    gap = np.maximum(0.0, np.maximum(lo - box[3:], box[:3] - hi))
+                    assert np.sqrt((gap ** 2).sum()) > margin
+
+    def test_small_margins_merge(self, merged_case):
+        """Not vacuous: a margin of 0 leaves fewer regions than the paper's graph."""
+        name, merge, eng, regions = merged_case
+        if merge[1] == 0.0:
+            assert regions.count < regions.merged_from[3].count

@@ -21,6 +21,7 @@ from lockgraph.domains import Dish, PeriodicCube
 from lockgraph.forces import Gravity
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError, SimulationError
+from lockgraph.parallel import Workers
 from lockgraph.physics import Physics
 from lockgraph.restitution import CollapseGuard, Constant
 from lockgraph.simulation import Simulation
@@ -216,7 +217,8 @@ def test_random_scenes_exact(n, seed, spread, lock, scale, threads, e):
         par.close()
 
 
-def test_worker_failure_reaches_the_caller_promptly():
+@pytest.mark.parametrize("thread", [0, 1])  # 0 on a pool thread, 1 on the caller's
+def test_worker_failure_reaches_the_caller_promptly(thread):
     cfg = SMALL["dish"]
     sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
     eng = Engine(sc.state, sc.physics, sc.dt, threads=2, lock="graph")
@@ -224,9 +226,9 @@ def test_worker_failure_reaches_the_caller_promptly():
         for _ in range(25):
             eng.step()
         before = eng.state()
-        eng.workers.fault = 1
+        eng.workers.fault = thread
         t0 = time.perf_counter()
-        with pytest.raises(RuntimeError, match="injected fault in worker thread 1") as info:
+        with pytest.raises(RuntimeError, match=f"injected fault in worker thread {thread}") as info:
             eng.step()
         assert time.perf_counter() - t0 < 10.0  # the other worker stopped promptly
         assert info.traceback[-1].name == "_one"  # the original traceback
@@ -236,6 +238,35 @@ def test_worker_failure_reaches_the_caller_promptly():
         eng.step()  # and the engine carries on
     finally:
         eng.close()
+
+
+def test_pool_map_runs_every_task_and_raises_the_first_failure():
+    """Workers.map: results in order, the last task on the calling thread, the
+    others on the pool; a failure is raised only once every task has ended,
+    the earliest task's first."""
+    import threading
+
+    w = Workers(3)
+    try:
+        names = w.map(lambda k: (k, threading.current_thread().name), [(k,) for k in range(3)])
+        assert [k for k, _ in names] == [0, 1, 2]
+        assert names[2][1] == threading.current_thread().name
+        assert all(n.startswith("lockgraph") for _, n in names[:2])
+        done = []
+
+        def task(k, fail):
+            time.sleep(0.05 * (2 - k))
+            done.append(k)
+            if fail:
+                raise ValueError(f"task {k}")
+
+        for fails, first in (((0, 2), 0), ((2,), 2), ((1, 2), 1)):
+            done.clear()
+            with pytest.raises(ValueError, match=f"task {first}"):
+                w.map(task, [(k, k in fails) for k in range(3)])
+            assert sorted(done) == [0, 1, 2]
+    finally:
+        w.close()
 
 
 def test_stall_becomes_an_error_not_a_hang():
