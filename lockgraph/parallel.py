@@ -32,9 +32,14 @@ only counted.  A widened reach joining non-adjacent regions is a violation
 too.  Without violations every event reads and writes exactly what it would in
 the sequential engine, so the state is bitwise the sequential one.
 
+A domain's clock is the time of the earliest event in its queue.  A boundary
+event is taken out of the queue while it runs (so the clock moves on and other
+boundary events may run beside it); an interior event stays in until it is
+done, which holds the clock back for one event and spares a queue update.
+
 Shared words: ``ctrl`` (G, ABORT, STATUS: one cache line each) and ``dctl``
-(per domain: its lock, and on another line its clock, in-flight count and
-progress).
+(per domain: its lock; on a second line its clock; on a third the in-flight
+flag and the progress count).
 """
 import functools
 import time
@@ -53,8 +58,12 @@ from .neighbors import JCOUNT, LCOUNT
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
 NCTRL = 24
-DLOCK, DCLOCK, DINFL, DPROG = 0, 8, 9, 10  # per-domain row of dctl
-NDCTL = 16
+# per-domain row of dctl: the lock, the clock (read by the other threads at
+# every boundary event) and what only termination and stall checks read (in
+# flight, progress) on three cache lines, so that a thread polling the clock
+# does not make each of the owner's other stores a miss
+DLOCK, DCLOCK, DINFL, DPROG = 0, 8, 16, 17
+NDCTL = 32
 # Regions this far (in lock-graph hops) from any other domain's are interior.  A
 # boundary event's regions are at most one hop across the cut (its particles may
 # meet), so 4 keeps every interior event >= 3 hops from every other thread's
@@ -223,6 +232,15 @@ def _domain_of(dlo, x):
 
 
 @kernel(inline=True)
+def _progress(dctl, ndom):
+    """Events completed so far by all domains."""
+    prog = 0
+    for e in range(ndom):
+        prog += load(dctl, e * NDCTL + DPROG)
+    return prog
+
+
+@kernel(inline=True)
 def _all_idle(dctl, ndom):
     for e in range(ndom):
         if load(dctl, e * NDCTL + DINFL) != 0:
@@ -280,7 +298,8 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
     oclock = -INF  # the other domains' clock when last looked at
     waiting = False
     nblk = 0  # consecutive blocked picks of this thread
-    wait_from = 0
+    wait_from = 0  # when this thread last saw progress while blocked (cycles)
+    checked = 0  # when it last looked
     seen = -1
     rng = load(ctrl, JITTER) * (2 * d + 1)
     while True:
@@ -315,11 +334,12 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
                 if not paper and t > oclock + window:
                     oclock = bits_float(_others_clock(dctl, d, ndom))
                 if paper or t <= oclock + window:
+                    # not taken out of the queue (as boundary events are): the
+                    # domain's clock stays t until the commit, which only holds
+                    # back the others' boundary events later than t for one
+                    # event, and saves a climb of the tournament
                     blocked = False
-                    hidden[i] = 1
-                    update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
                     store(dctl, d * NDCTL + DINFL, 1)
-                    _publish(dctl, d, tt, tsl)
             else:
                 # a boundary event: look before taking the global lock
                 boundary = paper or tb <= _others_clock(dctl, d, ndom)
@@ -355,16 +375,24 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             if not empty:
                 st[S_BLOCKED] += 1
             now = cycles()
-            prog = 0
-            for e in range(ndom):
-                prog += load(dctl, e * NDCTL + DPROG)
-            if not waiting or prog != seen:
+            # progress is looked at when a wait begins and then every eighth of
+            # stall_cycles (reading it at every pick would pull the line the
+            # working threads write at every event): a stall is reported after
+            # 1 to 1.125 stall_cycles without progress
+            if not waiting:
                 waiting = True
                 wait_from = now
-                seen = prog
-            elif now - wait_from > stall_cycles:
-                _fail(ctrl, STALL)
-                return STALL
+                checked = now
+                seen = _progress(dctl, ndom)
+            elif now - checked > stall_cycles >> 3:
+                checked = now
+                prog = _progress(dctl, ndom)
+                if prog != seen:
+                    seen = prog
+                    wait_from = now
+                elif now - wait_from > stall_cycles:
+                    _fail(ctrl, STALL)
+                    return STALL
             nblk += 1
             if nblk < PARK_AFTER:
                 cpu_relax()
