@@ -496,24 +496,27 @@ class Workers:
         and the last on the calling thread (kernels release the GIL).
 
         Why the caller works too: handing a task to a sleeping pool thread and
-        joining it costs ~0.1-0.2 ms each way (a futex wake and the GIL); the
-        caller is awake already.  An exception is raised only once every task
-        has ended, the first one's."""
+        joining it costs ~0.1-0.25 ms each way (a futex wake and the GIL); the
+        caller is awake already.  Nothing is left running when this returns or
+        raises: on any exception (a task's, or an interrupt while waiting) the
+        workers are told to stop (``ABORT``) and every task is waited for; an
+        earlier task's exception is raised first, as in a loop, but an
+        interrupt is raised as such."""
         from concurrent.futures import wait
 
-        if not self.inline_last:
-            futures = [self.pool.submit(fn, *a) for a in arglist]
-            return [f.result() for f in futures]
-        futures = [self.pool.submit(fn, *a) for a in arglist[:-1]]
+        inline = self.inline_last
+        futures = [self.pool.submit(fn, *a) for a in (arglist[:-1] if inline else arglist)]
         try:
-            last = fn(*arglist[-1])
-        except BaseException:
+            last = [fn(*arglist[-1])] if inline else []
+            return [f.result() for f in futures] + last
+        except BaseException as exc:
+            self.ctrl[ABORT] = 1  # workers stop at their next event; other kernels just end
             wait(futures)
-            for f in futures:  # an earlier task's exception comes first, as in a loop
-                if f.exception() is not None:
-                    raise f.exception()
+            if isinstance(exc, Exception):
+                for f in futures:
+                    if f.exception() is not None:
+                        raise f.exception()
             raise
-        return [f.result() for f in futures] + [last]
 
     def run(self, bundles, stt, locks, lstate, doms, window):
         """Run the workers until the step's events are done or one stops with a

@@ -21,7 +21,7 @@ from lockgraph.domains import Dish, PeriodicCube
 from lockgraph.forces import Gravity
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError, SimulationError
-from lockgraph.parallel import Workers
+from lockgraph.parallel import ABORT, Workers
 from lockgraph.physics import Physics
 from lockgraph.restitution import CollapseGuard, Constant
 from lockgraph.simulation import Simulation
@@ -260,11 +260,24 @@ def test_pool_map_runs_every_task_and_raises_the_first_failure():
             if fail:
                 raise ValueError(f"task {k}")
 
-        for fails, first in (((0, 2), 0), ((2,), 2), ((1, 2), 1)):
+        for fails, first in (((0, 2), 0), ((2,), 2), ((1, 2), 1), ((1,), 1)):
             done.clear()
             with pytest.raises(ValueError, match=f"task {first}"):
                 w.map(task, [(k, k in fails) for k in range(3)])
             assert sorted(done) == [0, 1, 2]
+
+        def interrupted(k):
+            if k == 2:  # the caller's share: as if Ctrl-C arrived when it returned
+                raise KeyboardInterrupt
+            time.sleep(0.2)
+            done.append(k)
+            raise ValueError(f"task {k}")
+
+        done.clear()
+        with pytest.raises(KeyboardInterrupt):
+            w.map(interrupted, [(k,) for k in range(3)])
+        assert sorted(done) == [0, 1]  # nothing left running
+        assert w.ctrl[ABORT] == 1  # and worker kernels were told to stop
     finally:
         w.close()
 
