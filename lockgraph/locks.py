@@ -266,7 +266,7 @@ def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n, pmap=
     ``pmap(fn, arglists)``, if given, runs the edge search in ``parts`` pieces
     on worker threads.  ``domains = (dlo, dhi, dbox, images, margin)``, if
     given, also makes a lock node of every node that lies in one domain farther
-    than ``margin`` from all the others (see ``far_merged_graph``)."""
+    than ``margin`` from all the others (see ``Engine._far_domains``)."""
     lockid = np.full(nnodes, -1, np.int32)
     stack = np.zeros(256, np.int64)
     if domains is None:

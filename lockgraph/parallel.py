@@ -486,7 +486,7 @@ class Workers:
         self.jitter = 0  # tests: a nonzero seed makes the workers pause at random
         self.stacks = None  # per-thread search stacks (rows), sized on first use
         self.wall_s = 0.0
-        self.inline_last = True
+        self.inline_last = True  # map: the caller runs the last task (False: benchmarks compare)
 
     def close(self):
         self.pool.shutdown(wait=True)
