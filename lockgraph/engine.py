@@ -154,6 +154,7 @@ class Engine:
         # exact policy, lock graph: regions far from the other domains are merged
         # (``_far_domains``); an attribute, not an option, so benchmarks can compare
         self.merge_far = True
+        self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
         self.last_events = 0.0
@@ -613,8 +614,11 @@ class Engine:
         scale = scale or self.scale
         if lock == "graph":
             far = self._far_domains(scale, img_pos, *domains) if domains is not None else None
-            return L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
-                                scale, self.n, self._pmap, self.threads, far)
+            regions = L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
+                                   scale, self.n, self._pmap, self.threads, far)
+            if domains is not None:
+                self._fine_hop = regions.info["fine_hop"]
+            return regions
         dims = 3 if lock == "grid3d" else 2
         return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
                             self.time, dims)
@@ -622,20 +626,26 @@ class Engine:
     def _far_domains(self, scale, img_pos, dlo, dhi, images):
         """``lock_graph``'s domains argument: each domain's box, the periodic
         image offsets and the margin beyond which a tree node of one domain is
-        a lock region however large.
+        a lock region however large; None when there is no margin yet.
 
         Why: under the exact policy an interior event (its regions >= INTERIOR
         hops from every other domain's) takes no lock at all, so away from the
         cuts the regions' size does not matter, while near them fine regions
         keep the boundary band thin and cheap to build.  The margin is
-        (scale + 4) R, R the largest reach: measured on the ring early at
-        N = 2e5 (R = 2.2 m), margins down to this keep the interior fraction
-        the unmerged graph has (0.905 at SCALE 2 and 4) with 2-3 times fewer
-        regions, and smaller ones lose some (0.887 at 3.9 R, SCALE 2).  The
-        breadth-first search from the cuts decides what is interior; the
-        margin only decides which regions are merged."""
+        2 R + (INTERIOR - 1) h, R the largest reach and h the mean hop between
+        the fine regions of the last threaded step (a region's size plus twice
+        its largest reach: farther apart they are not adjacent), so that a
+        merged region is about INTERIOR hops from the other domains.  The
+        first threaded step merges nothing.  The breadth-first search from the
+        cuts decides what is interior in the end; a margin that is too small
+        merges regions inside the boundary band, which makes all their events
+        boundary events (measured on the settled 10,000-grain dish at SCALE 4:
+        a margin of 8 R, about the band's half width, left an interior
+        fraction of 0.13 against 0.41 unmerged, 16 R and more kept 0.41)."""
+        if self._fine_hop is None:
+            return None
         rmax = float(self.nreach[0])
-        margin = (scale + 4.0) * rmax
+        margin = 2.0 * rmax + (INTERIOR - 1) * self._fine_hop
         dbox = np.empty((len(dlo), 6))
         dbox[:, :3] = np.inf
         dbox[:, 3:] = -np.inf

@@ -67,24 +67,34 @@ def _far_from_others(nbox, nd, start, end, dlo, dhi, dbox, imgs, margin):
 
 
 @kernel
-def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack, dlo, dhi, dbox, imgs, margin):
+def _mark_lock_nodes(ntop, nbox, nreach, scale, lockid, stack, dlo, dhi, dbox, imgs, margin,
+                     fine):
     """Top-down: lockid[nd] = region index for lock nodes, -1 above them.
 
     With domains (``dlo``/``dhi`` slot ranges, ``dbox`` their boxes, ``imgs``
     the periodic image offsets; empty arrays for none), a node of one domain
     farther than ``margin`` from every other domain is a lock node too.
+    ``fine`` (3,) gets the sums of the size and the largest reach of the lock
+    nodes that are not such merged ones, and their count.
     Returns the number of lock nodes (regions) or -1 if the stack was short.
     """
     nl = 0
     stack[0] = 0
     sp = 1
+    fine[:] = 0.0
     while sp > 0:
         sp -= 1
         nd = stack[sp]
         size = max(nbox[nd, 3] - nbox[nd, 0], nbox[nd, 4] - nbox[nd, 1], nbox[nd, 5] - nbox[nd, 2])
-        if ntop[nd, LEFT] < 0 or size < scale * nreach[nd] or (
-                dlo.shape[0] > 1 and _far_from_others(nbox, nd, ntop[nd, START], ntop[nd, END],
-                                                      dlo, dhi, dbox, imgs, margin)):
+        if ntop[nd, LEFT] < 0 or size < scale * nreach[nd]:
+            fine[0] += size
+            fine[1] += nreach[nd]
+            fine[2] += 1.0
+            lockid[nd] = nl
+            nl += 1
+            continue
+        if dlo.shape[0] > 1 and _far_from_others(nbox, nd, ntop[nd, START], ntop[nd, END],
+                                                 dlo, dhi, dbox, imgs, margin):
             lockid[nd] = nl
             nl += 1
             continue
@@ -273,8 +283,9 @@ def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n, pmap=
         no = np.zeros(0, np.int64)
         domains = (no, no, np.zeros((0, 6)), np.zeros((0, 3)), 0.0)
     dlo, dhi, dbox, imgs, margin = domains
+    fine = np.zeros(3)
     nl = _mark_lock_nodes(ntop, nbox, nreach, float(scale), lockid, stack, dlo, dhi, dbox, imgs,
-                          float(margin))
+                          float(margin), fine)
     if nl < 0:
         raise RuntimeError("lock-node search deeper than its stack")
     lock_of = np.zeros(n, np.int32)
@@ -297,8 +308,11 @@ def lock_graph(ntop, nbox, nreach, nnodes, half_images, img_pos, scale, n, pmap=
     v = np.concatenate([v[k, :ms[k]] for k in range(parts)])
     loff, ladj = _csr(nl, u, v)
     # np.take: fancy indexing of the (R, 6) rows took 0.24 ms here at N = 2e5, take 0.06
+    # the mean hop between fine regions: a size plus twice a reach (regions
+    # farther apart than their reaches are not adjacent)
+    hop = (fine[0] + 2.0 * fine[1]) / fine[2] if fine[2] > 0 else 0.0
     return LockRegions("graph", lock_of, loff, ladj, np.take(nbox, lnode, axis=0),
-                       {"scale": float(scale), "lock_nodes": lnode})
+                       {"scale": float(scale), "lock_nodes": lnode, "fine_hop": hop})
 
 
 def grid_locks(anc, reach_pair_max, domain, time, dims=2):

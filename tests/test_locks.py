@@ -44,12 +44,14 @@ def step_structures(name, lock, scale, merge=None, steps=3):
         return eng, eng.build_locks(img_pos, half), sc.physics.domain
     ndom, margin = merge
     dlo, dhi = eng._domains(ndom)
+    assert eng._far_domains(scale, img_pos, dlo, dhi, full) is None  # no hop measured yet
+    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))  # measures it
     far = eng._far_domains(scale, img_pos, dlo, dhi, full)
     if margin != "auto":
         far = far[:4] + (margin * float(eng.nreach[0]),)
     regions = L.lock_graph(eng.ntop, eng.nbox, eng.nreach, eng.nnodes, half, img_pos, scale,
                            eng.n, domains=far)
-    regions.merged_from = (dlo, dhi, far, eng.build_locks(img_pos, half))
+    regions.merged_from = (dlo, dhi, far, plain)
     return eng, regions, sc.physics.domain
 
 
@@ -276,3 +278,55 @@ class TestMergedFarRegions:
         name, merge, eng, regions = merged_case
         if merge[1] == 0.0:
             assert regions.count < regions.merged_from[3].count
+
+
+def _interior_particles(regions, dlo, dhi):
+    r = regions.count
+    dom, bd = np.zeros(r, np.int64), np.zeros(r, np.int64)
+    classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
+                     np.zeros(r, np.int64), INTERIOR)
+    return bd[regions.lock_of] >= INTERIOR
+
+
+def test_merging_keeps_interior_particles_interior(merged_case):
+    """With the engine's margin (from the fine regions' hop) merged regions lie
+    beyond the boundary band: every particle interior under the paper's graph
+    is interior under the merged one (merging only shortens paths, so the
+    reverse always holds)."""
+    name, merge, eng, regions = merged_case
+    dlo, dhi, far, plain = regions.merged_from
+    merged_in = _interior_particles(regions, dlo, dhi)
+    plain_in = _interior_particles(plain, dlo, dhi)
+    assert not (merged_in & ~plain_in).any()
+    if merge[1] == "auto":
+        assert (merged_in == plain_in).all(), f"{(plain_in & ~merged_in).sum()} particles lost"
+
+
+@pytest.mark.parametrize("name, n, params", [("ring", 20000, {}),
+                                             ("dish", 4000, {"spacing": 1.1})])
+def test_engine_margin_merges_without_losing_interior(name, n, params):
+    """Scenes big enough for the engine's own margin to matter.  The ring: it
+    merges (fewer regions) and every interior particle stays interior.  The
+    dense block: regions are as wide as the boundary band is deep, so a margin
+    of a fixed 8 R (the one first tried, tuned on the ring) would merge regions
+    inside the band and lose most interior particles; the margin from the
+    measured hop keeps them all."""
+    sc = scenarios.load(name, n=n, params=params)
+    eng = Engine(sc.state, sc.physics, sc.dt, scale=4.0)
+    for _ in range(2):
+        eng.step()
+    img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
+    eng._setup(img_pos, img_vel, half)
+    dlo, dhi = eng._domains(2)
+    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))  # measures the hop
+    merged = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))
+    fixed = L.lock_graph(eng.ntop, eng.nbox, eng.nreach, eng.nnodes, half, img_pos, 4.0, eng.n,
+                         domains=eng._far_domains(4.0, img_pos, dlo, dhi, full)[:4]
+                         + (8.0 * float(eng.nreach[0]),))
+    want = _interior_particles(plain, dlo, dhi)
+    assert want.sum() > 0.1 * eng.n
+    assert (_interior_particles(merged, dlo, dhi) == want).all()
+    if name == "ring":
+        assert merged.count < 0.8 * plain.count
+    else:
+        assert _interior_particles(fixed, dlo, dhi).sum() < 0.5 * want.sum()
