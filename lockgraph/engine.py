@@ -614,11 +614,8 @@ class Engine:
         scale = scale or self.scale
         if lock == "graph":
             far = self._far_domains(scale, img_pos, *domains) if domains is not None else None
-            regions = L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
-                                   scale, self.n, self._pmap, self.threads, far)
-            if domains is not None:
-                self._fine_hop = regions.info["fine_hop"]
-            return regions
+            return L.lock_graph(self.ntop, self.nbox, self.nreach, self.nnodes, half, img_pos,
+                                scale, self.n, self._pmap, self.threads, far)
         dims = 3 if lock == "grid3d" else 2
         return L.grid_locks(self.anc, self.top[0] + self.top[1], self.physics.domain,
                             self.time, dims)
@@ -636,7 +633,8 @@ class Engine:
         the fine regions of the last threaded step (a region's size plus twice
         its largest reach: farther apart they are not adjacent), so that a
         merged region is about INTERIOR hops from the other domains.  The
-        first threaded step merges nothing.  The breadth-first search from the
+        first threaded step merges nothing (``_fine_hop`` is set by
+        ``_events_parallel``).  The breadth-first search from the
         cuts decides what is interior in the end; a margin that is too small
         merges regions inside the boundary band, which makes all their events
         boundary events (measured on the settled 10,000-grain dish at SCALE 4:
@@ -694,8 +692,10 @@ class Engine:
         dtour_t, dtour_s)``: the domains' slot ranges and their queues (built
         with the first events)."""
         dlo, dhi, dtour_t, dtour_s = queues
-        merge = self.merge_far and self.policy == "exact"
+        merge = self.merge_far and self.policy == "exact" and self.lock == "graph"
         regions = self.build_locks(img_pos, half, domains=(dlo, dhi, full) if merge else None)
+        if merge:  # the next step's margin
+            self._fine_hop = regions.info["fine_hop"]
         locks = (regions.lock_of, regions.loff, regions.ladj)
         r = regions.count
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from ._jit import kernel
-from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2, search_tasks
+from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, _box_gap2, box_gap2, search_tasks
 
 KINDS = ("graph", "grid", "grid3d")
 
@@ -52,16 +52,7 @@ def _far_from_others(nbox, nd, start, end, dlo, dhi, dbox, imgs, margin):
         if e == own or dhi[e] <= dlo[e]:
             continue
         for k in range(imgs.shape[0]):
-            d2 = 0.0
-            for ax in range(3):
-                o = imgs[k, ax]
-                g = nbox[nd, ax] - (dbox[e, ax + 3] + o)
-                h = (dbox[e, ax] + o) - nbox[nd, ax + 3]
-                if h > g:
-                    g = h
-                if g > 0.0:
-                    d2 += g * g
-            if d2 <= m2:
+            if box_gap2(nbox, nd, dbox, e, imgs[k, 0], imgs[k, 1], imgs[k, 2]) <= m2:
                 return False
     return True
 

@@ -344,21 +344,28 @@ def node_bounds(anc, reach, ntop, nnodes, nbox, nreach):
 @kernel(inline=True)
 def _box_gap2(nbox, a, b, ox, oy, oz):
     """Squared distance between the box of node a and the box of node b shifted by o."""
+    return box_gap2(nbox, a, nbox, b, ox, oy, oz)
+
+
+@kernel(inline=True)
+def box_gap2(boxa, a, boxb, b, ox, oy, oz):
+    """Squared distance between the box boxa[a] and the box boxb[b] shifted by o
+    (rows lo x, y, z, hi x, y, z)."""
     d2 = 0.0
-    g = nbox[a, 0] - (nbox[b, 3] + ox)
-    h = (nbox[b, 0] + ox) - nbox[a, 3]
+    g = boxa[a, 0] - (boxb[b, 3] + ox)
+    h = (boxb[b, 0] + ox) - boxa[a, 3]
     if h > g:
         g = h
     if g > 0.0:
         d2 += g * g
-    g = nbox[a, 1] - (nbox[b, 4] + oy)
-    h = (nbox[b, 1] + oy) - nbox[a, 4]
+    g = boxa[a, 1] - (boxb[b, 4] + oy)
+    h = (boxb[b, 1] + oy) - boxa[a, 4]
     if h > g:
         g = h
     if g > 0.0:
         d2 += g * g
-    g = nbox[a, 2] - (nbox[b, 5] + oz)
-    h = (nbox[b, 2] + oz) - nbox[a, 5]
+    g = boxa[a, 2] - (boxb[b, 5] + oz)
+    h = (boxb[b, 2] + oz) - boxa[a, 5]
     if h > g:
         g = h
     if g > 0.0:

@@ -45,7 +45,8 @@ def step_structures(name, lock, scale, merge=None, steps=3):
     ndom, margin = merge
     dlo, dhi = eng._domains(ndom)
     assert eng._far_domains(scale, img_pos, dlo, dhi, full) is None  # no hop measured yet
-    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))  # measures it
+    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))
+    eng._fine_hop = plain.info["fine_hop"]  # as a threaded step's _events_parallel does
     far = eng._far_domains(scale, img_pos, dlo, dhi, full)
     if margin != "auto":
         far = far[:4] + (margin * float(eng.nreach[0]),)
@@ -318,7 +319,8 @@ def test_engine_margin_merges_without_losing_interior(name, n, params):
     img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
     eng._setup(img_pos, img_vel, half)
     dlo, dhi = eng._domains(2)
-    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))  # measures the hop
+    plain = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))
+    eng._fine_hop = plain.info["fine_hop"]  # as a threaded step's _events_parallel does
     merged = eng.build_locks(img_pos, half, domains=(dlo, dhi, full))
     fixed = L.lock_graph(eng.ntop, eng.nbox, eng.nreach, eng.nnodes, half, img_pos, 4.0, eng.n,
                          domains=eng._far_domains(4.0, img_pos, dlo, dhi, full)[:4]
