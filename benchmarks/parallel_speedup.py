@@ -32,6 +32,16 @@ N = 50,000, target >= 1.7x):
 * ``dish``: the settled bed alone (dish late), N = 10,000: dense, about 40
   events per grain per step, each well under a microsecond of work.
 * ``ring_late``: ring late (after 2 orbits) at N = 50,000, for comparison.
+* ``dish_marble_dem``: dish_marble late at the issue's N = 50,000
+  (``--quick``: 10,001) with its bed settled by a DEM code (``--bed-code``)
+  instead of by the engine: the dish scene's falling block settled by
+  LAMMPS at E = 1e7 Pa (70 min on one core at N = 50,000 the first time,
+  then cached), radii shrunk by the largest soft overlap, at rest; the marble
+  then placed as the scene places it (``marble_gap`` above the highest
+  grain, moving down at ``marble_speed``), and run ``--bed-steps``
+  sequential steps before the timing (the grains close their gaps, the
+  marble lands).  The paper's "late": the particles at rest at the bottom of
+  the cylinder.
 * ``deep_bed``: the ``--paper-scale`` marble test's bed — 8,700 grains
   settled by a DEM code (``--bed-code``, LAMMPS by default: ~7 min on one core
   the first time, then cached), 7.5 mm dish, tc = 3e-5 s — with its 6 mm
@@ -59,6 +69,7 @@ CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish_marble": ("dish_marble", "late", 10001, 2001),
          "dish": ("dish", "late", 10000, 2000),
          "ring_late": ("ring", "late", 50000, 20000),
+         "dish_marble_dem": ("dish_marble", "late", 50000, 10001),
          "deep_bed": ("dish_marble", "late", 8701, 8701)}
 DEEP_BED_DROP = 0.08  # m
 TARGET = 1.7
@@ -101,10 +112,38 @@ def deep_bed(code, presteps):
         eng.close()
 
 
+def dem_late(scene, n, code, presteps):
+    """A scene-like namespace (state, physics, dt): ``scene``'s late state with
+    its bed of n - 1 grains settled by the DEM ``code`` (cached) and the marble
+    placed above it as the scene places it, then run ``presteps`` sequential
+    steps (the shrunk grains fall into contact in ~13 steps, the marble
+    reaches the bed in ~20: before that a step has a handful of events)."""
+    from lockgraph import marble_drop as M
+    from lockgraph.generators import add_marble
+
+    sf = scenarios.read(scene)
+    p = scenarios.resolve_params(sf, n, None, None, None)
+    bed_params = {k: v for k, v in p.items() if k not in M.MARBLE_KEYS + ("n", "seed")}
+    bed, sc, info = M.settled_bed(n - 1, p["seed"], bed_params, code, progress=say)
+    say(f"{scene} late N={n}: {code}-settled bed ({info['cache']}); {presteps} sequential "
+        f"steps")
+    eng = Engine(add_marble(bed, p), sc.physics, p["dt"])
+    try:
+        for k in range(presteps):
+            eng.step()
+            if (k + 1) % 10 == 0:
+                say(f"  step {k + 1}/{presteps}: {eng.step_stats[K.S_POPS]:.0f} events")
+        return SimpleNamespace(state=eng.state(), physics=sc.physics, dt=p["dt"])
+    finally:
+        eng.close()
+
+
 def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
     say(f"{name}: loading {scene} {state} N={n}")
     if name == "deep_bed":
         sc = deep_bed(bed_code, bed_steps)
+    elif name == "dish_marble_dem":
+        sc = dem_late(scene, n, bed_code, bed_steps)
     else:
         sc = scenarios.load(scene, state, n=n, progress=say)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
@@ -183,9 +222,10 @@ def main():
     ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid",
                     help="graph:SCALE, grid, grid3d, ... (graph:1.2,graph:4,graph:16,grid)")
     ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
-                    help="the DEM code that settles the deep_bed case's bed (lammps)")
+                    help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
     ap.add_argument("--bed-steps", type=int, default=100,
-                    help="deep_bed: sequential steps of the falling marble before timing")
+                    help="deep_bed, dish_marble_dem: sequential steps of the falling "
+                         "marble before timing (100)")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()
     locks = parse_locks(args.locks)

@@ -23,7 +23,8 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .parallel import INTERIOR, Workers, classify_regions, cycles_per_second
+from .parallel import (INTERIOR, Workers, classify_ranges, classify_regions,
+                       cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -372,6 +373,8 @@ class Engine:
                               ph.domain.code, wp, hill.omega if hill is not None else 0.0,
                               not check_end)
                              for q in sl])
+        if self.workers is not None:
+            self.workers.rest()
         self._accumulate(st)
         self.last_events = float(st[K.S_POPS])
         self.steps_done += 1
@@ -701,8 +704,14 @@ class Engine:
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
         dom = np.zeros(r, np.int64)
         bd = np.zeros(r, np.int64)
-        far = classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom, bd,
-                               np.zeros(r, np.int64), INTERIOR)
+        if regions.kind == "graph":  # regions are tree nodes: slot ranges
+            nodes = regions.info["lock_nodes"]
+            far = classify_ranges(self.ntop[nodes, START], self.ntop[nodes, END], regions.loff,
+                                  regions.ladj, dlo, dhi, dom, bd, np.zeros(r, np.int64),
+                                  INTERIOR)
+        else:
+            far = classify_regions(regions.lock_of, regions.loff, regions.ladj, dlo, dhi, dom,
+                                   bd, np.zeros(r, np.int64), INTERIOR)
         # the statistics are worked out only when asked for (lock_stats): ~1 ms a step at N = 2e5
         self._regions = (regions, far / max(self.n, 1))
         self._lock_stats = None

@@ -12,7 +12,7 @@ import pytest
 from lockgraph import locks as L
 from lockgraph import scenarios
 from lockgraph.engine import Engine
-from lockgraph.parallel import INTERIOR, classify_regions
+from lockgraph.parallel import INTERIOR, classify_ranges, classify_regions
 
 SCENES = {
     "ring": dict(n=800, params={"dispersion": 0.003, "dt": 60.0}),
@@ -156,6 +156,15 @@ class TestLockRegions:
         full = want_dom != -2
         np.testing.assert_array_equal(bd[full], want_bd[full])
         assert far == int((want_bd[regions.lock_of] >= INTERIOR).sum())
+        if regions.kind == "graph":  # the engine's O(regions) version for tree nodes
+            nodes = regions.info["lock_nodes"]
+            dom2, bd2 = np.zeros(r, np.int64), np.zeros(r, np.int64)
+            far2 = classify_ranges(eng.ntop[nodes, 2], eng.ntop[nodes, 3], regions.loff,
+                                   regions.ladj, dlo, dhi, dom2, bd2, np.zeros(r, np.int64),
+                                   INTERIOR)
+            np.testing.assert_array_equal(dom2, dom)
+            np.testing.assert_array_equal(bd2, bd)
+            assert far2 == far
 
 
 def test_lock_graph_regions_are_tree_nodes_partitioning_the_slots():

@@ -282,6 +282,53 @@ def test_pool_map_runs_every_task_and_raises_the_first_failure():
         w.close()
 
 
+def test_pool_runs_more_tasks_than_threads_and_sleeps_when_the_step_is_over():
+    """More tasks than threads: each pool thread runs several, results in order.
+    After ``rest()`` every pool thread goes to sleep (no spinning between
+    steps) and wakes for the next task; ``close()`` ends the threads."""
+    from lockgraph.parallel import NWSYNC, W_ASLEEP
+
+    w = Workers(2)
+    try:
+        assert w.map(lambda k: k * k, [(k,) for k in range(7)]) == [k * k for k in range(7)]
+        w.inline_last = False
+        assert w.map(lambda k: k + 1, [(k,) for k in range(5)]) == [1, 2, 3, 4, 5]
+        w.rest()
+        t0 = time.perf_counter()
+        while not all(w._sync[k * NWSYNC + W_ASLEEP] for k in range(2)):
+            assert time.perf_counter() - t0 < 5.0, "pool threads still spinning after rest()"
+            time.sleep(0.001)
+        assert w.map(lambda k: -k, [(1,), (2,)]) == [-1, -2]  # woken again
+    finally:
+        w.close()
+    w.close()
+    assert not any(th.is_alive() for th in w._pool)
+    with pytest.raises(RuntimeError, match="after close"):
+        w.map(abs, [(1,)])
+
+
+def test_pool_wait_policy(monkeypatch):
+    """Spinning for the next task is on by default, off (passive) when asked
+    or when the threads outnumber the cores; a bad policy names the variable."""
+    cores = len(os.sched_getaffinity(0))
+    for env, threads, passive in ((None, 2, 2 > cores), ("passive", 2, True),
+                                  ("active", cores + 1, True)):
+        if env is None:
+            monkeypatch.delenv("LOCKGRAPH_WAIT_POLICY", raising=False)
+        else:
+            monkeypatch.setenv("LOCKGRAPH_WAIT_POLICY", env)
+        w = Workers(threads)
+        try:
+            assert w.passive == passive
+            assert w.map(lambda k: 2 * k, [(k,) for k in range(threads)]) == [
+                2 * k for k in range(threads)]
+        finally:
+            w.close()
+    monkeypatch.setenv("LOCKGRAPH_WAIT_POLICY", "spin")
+    with pytest.raises(InputError, match="LOCKGRAPH_WAIT_POLICY"):
+        Workers(2)
+
+
 def test_stall_becomes_an_error_not_a_hang():
     cfg = SMALL["dish"]
     sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
