@@ -31,9 +31,9 @@ from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
 from .state import State
-from .tree import (AXIS, END, NTOP, START, axis_extent, bound_node, count_nodes, identity,
-                   node_bounds, pair_search, permute_mat3, permute_vec, rebuild_split, resort,
-                   search_tasks, skeleton, subtree_bounds)
+from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
+                   pair_search, permute_mat3, permute_vec, resort, search_tasks, skeleton,
+                   subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 POLICIES = ("exact", "paper")
@@ -64,12 +64,9 @@ def _anchor_and_bound(pos, anc, reach, ntop, nd, nbox, nreach, order):
 
 
 @kernel
-def _reach_and_extent(pos, vel, rad, reach, par, extra, top, pos_all, perm, lo, hi, axis, ext):
-    """Step-start reaches of a part of the particles (sliced arrays) and, if
-    ``axis`` >= 0, the part's extent along ``axis`` (its slots lo..hi-1)."""
+def _reach(pos, vel, rad, reach, par, extra, top):
+    """Step-start reaches of a part of the particles (sliced arrays)."""
     K.compute_reach(pos, vel, rad, reach, par, extra, top)
-    if axis >= 0:
-        axis_extent(pos_all, perm, lo, hi, axis, ext)
 
 
 def _permute_some(arrays, perm, scratch):
@@ -207,6 +204,7 @@ class Engine:
         parts = max(self.threads, 2 ** (math.ceil(math.log2(self.threads))))
         self.vslots = np.zeros((parts, vcap), np.int64)
         self.vids = np.zeros((parts, vcap), np.int32)
+        self.keys = np.zeros(n)  # selection keys by slot (resort; threads own disjoint slots)
         self.anc = np.zeros((n, 3))
         self.reach = np.zeros(n)
         self.top = np.zeros(2)
@@ -396,7 +394,6 @@ class Engine:
         """
         n = self.n
         sl = self._slices()
-        axis = -1  # >= 0: the root is re-split from the extents the parts measure
         if touching_only:
             self.reach[:] = self.rad
         else:
@@ -404,19 +401,9 @@ class Engine:
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra
-            parts = sl
-            if self.threads > 1 and int(self.ntop[0, 0]) >= 0:
-                # the threads' subtrees, each inside one half of the root, also
-                # measure their extent along the root's axis for its re-split
-                parts = [slice(int(self.ntop[nd, START]), int(self.ntop[nd, END]))
-                         for nd in self.subroots]
-                axis = int(self.ntop[0, AXIS])
-            tops = np.zeros((len(parts), 2))
-            ext = np.zeros((len(parts), 2))
-            self._pmap(_reach_and_extent, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q],
-                                            self.par, extra, tops[k], self.pos, self.perm,
-                                            q.start, q.stop, axis, ext[k])
-                                           for k, q in enumerate(parts)])
+            tops = np.zeros((len(sl), 2))
+            self._pmap(_reach, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q], self.par,
+                                 extra, tops[k]) for k, q in enumerate(sl)])
             top = np.sort(tops.ravel())[::-1]
             self.top[:] = top[:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
@@ -425,26 +412,19 @@ class Engine:
                     f"{self.top[1]:.4g} m) could span half the periodic box "
                     f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
             self.par[K.P_RMAX] = self.top[0]
-        # the tree: a fresh one every rebuild_every steps, else last step's re-sorted;
-        # the nodes above the threads' subtrees first, then the subtrees in parallel
+        # the tree: a fresh one every rebuild_every steps, else last step's re-sorted
+        # (each node re-split in a band about last step's split, twice the skin
+        # distance wide: rebuild_node); the nodes above the threads' subtrees
+        # first, then the subtrees in parallel
         fresh = self.since_build is None or self.since_build >= self.rebuild_every
         self.since_build = 0 if fresh else self.since_build + 1
-        if not fresh and axis >= 0:
-            # the root's re-split from the parts' extents (the same result as
-            # rebuild_node's own two passes over all N), then the nodes below it
-            m = int(self.ntop[int(self.ntop[0, 0]), END])
-            left = np.array([q.stop <= m for q in parts])
-            rebuild_split(self.pos, self.perm, self.ntop, 0, self.vslots[0], self.vids[0],
-                          ext[left, 1].max(), ext[~left, 0].min())
-            for child in (int(self.ntop[0, 0]), int(self.ntop[0, 1])):
-                if resort(self.pos, self.perm, self.ntop, child, self.depth_split - 1, False,
-                          self.vslots[0], self.vids[0], self.stacks[0]) < 0:
-                    raise SimulationError("kD-tree deeper than its work stack")
-        elif resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh,
-                    self.vslots[0], self.vids[0], self.stacks[0]) < 0:
+        band = 2.0 * float(self.par[K.P_EXTRA])
+        if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
+                  self.vids[0], self.stacks[0], self.nbox, band, self.keys) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
         res = self._pmap(resort, [(self.pos, self.perm, self.ntop, nd, -1, fresh,
-                                   self.vslots[k], self.vids[k], self.stacks[k])
+                                   self.vslots[k], self.vids[k], self.stacks[k], self.nbox, band,
+                                   self.keys)
                                   for k, nd in enumerate(self.subroots)])
         if min(res) < 0:
             raise SimulationError("kD-tree deeper than its work stack")

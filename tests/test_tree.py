@@ -187,32 +187,75 @@ def test_single_particle_has_no_pairs():
     assert tree_pairs(pos, np.ones(1), np.ones(1), PeriodicCube(10.0)) == []
 
 
+def _kd_ordered(pos, perm, ntop, nnodes):
+    """Every node's left child's particles <= its right child's along its axis."""
+    from lockgraph.tree import AXIS, END, LEFT, RIGHT, START
+    for nd in range(nnodes):
+        left, right = int(ntop[nd, LEFT]), int(ntop[nd, RIGHT])
+        if left < 0:
+            continue
+        ax = int(ntop[nd, AXIS])
+        lo = pos[perm[ntop[left, START]:ntop[left, END]], ax]
+        hi = pos[perm[ntop[right, START]:ntop[right, END]], ax]
+        if lo.max() > hi.min():
+            return False
+    return True
+
+
+def _step_later(seed, n=500, leaf=8, noise=0.05, wrapped=0):
+    """A tree built over random points, its node bounds, and the points a step
+    later: moved by ``noise``, ``wrapped`` of them by a box length (a periodic
+    wrap)."""
+    from lockgraph.tree import skeleton
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(-1, 1, (n, 3))
+    ntop = np.zeros((count_nodes(n, leaf), 6), np.int64)
+    perm = np.arange(n, dtype=np.int32)
+    nn = build(pos, leaf, perm, ntop, np.zeros(256, np.int64))
+    assert nn == skeleton(n, leaf, ntop.copy(), np.zeros(256, np.int64))
+    nbox, nreach = np.zeros((nn, 6)), np.zeros(nn)
+    node_bounds(np.ascontiguousarray(pos[perm]), np.zeros(n), ntop, nn, nbox, nreach)
+    later = pos + rng.normal(0, noise, pos.shape)
+    for i in rng.choice(n, wrapped, replace=False):
+        later[i, rng.integers(3)] += 2.0 * rng.choice([-1.0, 1.0])
+    return later, perm, ntop, nn, nbox
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("cap", [4096, 3])
-def test_root_resplit_from_the_halves_extents_equals_rebuild_node(seed, cap):
-    """The threaded engine re-splits the root from extents its threads measured
-    (``axis_extent`` on each half, ``rebuild_split``): the same permutation as
-    ``rebuild_node``'s own passes, whether the crossers fit the work buffers or
-    (cap 3) the root falls back to a full selection."""
-    from lockgraph.tree import (AXIS, END, LEFT, axis_extent, count_nodes, rebuild_split,
-                                resort)
-    rng = np.random.default_rng(seed)
-    n = 500
-    pos = rng.uniform(-1, 1, (n, 3))
-    ntop = np.zeros((count_nodes(n, 8), 6), np.int64)
-    perm = np.arange(n, dtype=np.int32)
-    assert build(pos, 8, perm, ntop, np.zeros(256, np.int64)) > 0
-    pos = pos + rng.normal(0, 0.05, pos.shape)  # a step later: some cross the root's plane
-    m = int(ntop[int(ntop[0, LEFT]), END])
-    axis = int(ntop[0, AXIS])
-    ext = np.zeros((2, 2))
-    axis_extent(pos, perm, 0, m, axis, ext[0])
-    axis_extent(pos, perm, m, n, axis, ext[1])
-    assert ext[0, 1] > ext[1, 0]  # crossers exist
-    slots, ids = np.zeros(cap, np.int64), np.zeros(cap, np.int32)
-    by_node = perm.copy()
-    resort(pos, by_node, ntop, 0, 1, False, slots, ids, np.zeros(256, np.int64))
-    by_split = perm.copy()
-    rebuild_split(pos, by_split, ntop, 0, slots, ids, ext[0, 1], ext[1, 0])
-    assert np.array_equal(by_node, by_split)
-    assert pos[by_split[:m], axis].max() <= pos[by_split[m:], axis].min()
+@pytest.mark.parametrize("band", [0.0, 0.01, 10.0])
+@pytest.mark.parametrize("wrapped", [0, 25])
+def test_resort_of_last_steps_tree_is_a_kd_order(seed, cap, band, wrapped):
+    """``resort`` of last step's tree (``rebuild_node``: a band about last
+    step's split, widened, then the halves' extents) leaves a permutation in kD
+    order, whether particles moved a little or wrapped across a periodic
+    boundary, the band is empty, tight or holds everything, or the movers
+    overflow the work buffers (cap 3)."""
+    from lockgraph.tree import resort
+    pos, perm, ntop, nn, nbox = _step_later(seed, wrapped=wrapped)
+    assert not _kd_ordered(pos, perm, ntop, nn)  # particles crossed splits
+    n = len(pos)
+    assert resort(pos, perm, ntop, 0, -1, False, np.zeros(cap, np.int64),
+                  np.zeros(cap, np.int32), np.zeros(256, np.int64), nbox, band, np.zeros(n)) == 0
+    assert sorted(perm) == list(range(n))
+    assert _kd_ordered(pos, perm, ntop, nn)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_resort_moves_only_what_crossed(seed):
+    """Nothing moved: the order is kept.  One particle wrapped across the
+    box: only the slots along its way change (the halves' extents alone would
+    make every particle of the other half a crosser and re-select every node
+    on its path, which is why the band about last step's split comes first)."""
+    from lockgraph.tree import resort
+    pos, perm, ntop, nn, nbox = _step_later(seed, noise=0.0)
+    n = len(pos)
+    args = (np.zeros(4096, np.int64), np.zeros(4096, np.int32), np.zeros(256, np.int64), nbox,
+            0.01, np.zeros(n))
+    kept = perm.copy()
+    resort(pos, kept, ntop, 0, -1, False, *args)
+    assert np.array_equal(kept, perm)
+    pos[perm[0], int(ntop[0, 5])] += 2.0  # the first slot's particle to the far side
+    resort(pos, kept, ntop, 0, -1, False, *args)
+    assert _kd_ordered(pos, kept, ntop, nn)
+    assert 0 < np.count_nonzero(kept != perm) <= 40, np.count_nonzero(kept != perm)
