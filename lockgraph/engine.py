@@ -227,6 +227,7 @@ class Engine:
         self.order = np.zeros((parts, self.nnodes_cap), np.int64)
         self.scratches = np.zeros((t, n))  # gather buffers of the permutation (8 bytes)
         self.nbox = np.zeros((self.nnodes_cap, 6))
+        self.nsplit = np.full(self.nnodes_cap, np.nan)  # split keys (resort)
         self.nreach = np.zeros(self.nnodes_cap)
         self.noff = np.zeros(n + 1, np.int64)
         self.pair_cap = max(1024, 4 * n // self.threads)  # per search part
@@ -420,11 +421,11 @@ class Engine:
         self.since_build = 0 if fresh else self.since_build + 1
         band = 2.0 * float(self.par[K.P_EXTRA])
         if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
-                  self.vids[0], self.stacks[0], self.nbox, band, self.keys) < 0:
+                  self.vids[0], self.stacks[0], self.nsplit, band, self.keys) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
         res = self._pmap(resort, [(self.pos, self.perm, self.ntop, nd, -1, fresh,
-                                   self.vslots[k], self.vids[k], self.stacks[k], self.nbox, band,
-                                   self.keys)
+                                   self.vslots[k], self.vids[k], self.stacks[k], self.nsplit,
+                                   band, self.keys)
                                   for k, nd in enumerate(self.subroots)])
         if min(res) < 0:
             raise SimulationError("kD-tree deeper than its work stack")

@@ -48,50 +48,16 @@ def count_nodes(n, leaf_size):
     return count(max(n, 1))
 
 
-@kernel
-def _select(perm, pos, axis, lo, hi, k):
-    """Reorder perm[lo..hi] so that perm[k] holds the k-th smallest key."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        a = pos[perm[lo], axis]
-        b = pos[perm[mid], axis]
-        c = pos[perm[hi], axis]
-        if a > b:
-            a, b = b, a
-        if b > c:
-            b = c
-        pivot = a if a > b else b
-        i = lo
-        j = hi
-        while i <= j:
-            while pos[perm[i], axis] < pivot:
-                i += 1
-            while pos[perm[j], axis] > pivot:
-                j -= 1
-            if i <= j:
-                tmp = perm[i]
-                perm[i] = perm[j]
-                perm[j] = tmp
-                i += 1
-                j -= 1
-        if k <= j:
-            hi = j
-        elif k >= i:
-            lo = i
-        else:
-            return
-
-
 @kernel(inline=True)
-def _select_keyed(perm, keys, lo, hi, k):
-    """``_select`` on keys copied next to the slots (keys[q] the key of
-    perm[q], moved along with it): the passes read contiguous memory instead
-    of gathering pos[perm[q]]."""
+def _select_keyed(perm, keys, off, lo, hi, k):
+    """Reorder perm[lo..hi] so that perm[k] holds the k-th smallest key, the
+    key of perm[q] being keys[q + off] (moved along with it): the passes read
+    contiguous keys instead of gathering positions."""
     while lo < hi:
         mid = (lo + hi) >> 1
-        a = keys[lo]
-        b = keys[mid]
-        c = keys[hi]
+        a = keys[lo + off]
+        b = keys[mid + off]
+        c = keys[hi + off]
         if a > b:
             a, b = b, a
         if b > c:
@@ -100,17 +66,17 @@ def _select_keyed(perm, keys, lo, hi, k):
         i = lo
         j = hi
         while i <= j:
-            while keys[i] < pivot:
+            while keys[i + off] < pivot:
                 i += 1
-            while keys[j] > pivot:
+            while keys[j + off] > pivot:
                 j -= 1
             if i <= j:
                 tmp = perm[i]
                 perm[i] = perm[j]
                 perm[j] = tmp
-                x = keys[i]
-                keys[i] = keys[j]
-                keys[j] = x
+                x = keys[i + off]
+                keys[i + off] = keys[j + off]
+                keys[j + off] = x
                 i += 1
                 j -= 1
         if k <= j:
@@ -123,10 +89,65 @@ def _select_keyed(perm, keys, lo, hi, k):
 
 @kernel(inline=True)
 def _split_keyed(pos, perm, axis, s, e, m, keys):
-    """perm[s..e-1] split so that its m - s smallest keys along ``axis`` come first."""
+    """perm[s..e-1] split so that its m - s smallest keys come first; returns
+    a key between the two parts."""
     for q in range(s, e):
         keys[q] = pos[perm[q], axis]
-    _select_keyed(perm, keys, s, e - 1, m)
+    _select_keyed(perm, keys, 0, s, e - 1, m)
+    return keys[m]
+
+
+@kernel(inline=True)
+def _select_movers(pos, perm, slots, ids, nv, nl, axis, keys, s):
+    """Of the nv particles in ``slots`` (the first nl of them left-half
+    slots), the nl with the smallest keys end in left-half slots: the ones
+    that change sides are swapped pairwise and all others keep their slots
+    (and so their place in the children: a selection that shuffled them all
+    made the children's splits move them again, all the way down).
+    keys[s..s+nv-1] and ``ids`` are scratch.  Returns a key between the parts."""
+    for q in range(nv):
+        ids[q] = perm[slots[q]]
+        keys[s + q] = pos[ids[q], axis]
+    if nl == 0 or nl == nv:
+        w = keys[s]
+        for q in range(nv):
+            w = max(w, keys[s + q]) if nl == nv else min(w, keys[s + q])
+        return w
+    _select_keyed(ids, keys, s, 0, nv - 1, nl)  # the nl smallest keys first
+    wl = keys[s]
+    for q in range(nl):
+        wl = max(wl, keys[s + q])
+    ties = 0  # of the nl smallest, those equal to wl
+    for q in range(nl):
+        if keys[s + q] == wl:
+            ties += 1
+    wr = keys[s + nl]
+    for q in range(nl, nv):
+        wr = min(wr, keys[s + q])
+    # left slots whose particle goes right (ids: their indices in slots), then
+    # each right slot whose particle goes left swaps with the next of them
+    nleave = 0
+    for q in range(nl):
+        x = pos[perm[slots[q]], axis]
+        if x < wl:
+            continue
+        if x == wl and ties > 0:
+            ties -= 1
+            continue
+        ids[nleave] = q
+        nleave += 1
+    a = 0
+    for q in range(nl, nv):
+        x = pos[perm[slots[q]], axis]
+        if x < wl or (x == wl and ties > 0):
+            if x == wl:
+                ties -= 1
+            u = slots[ids[a]]
+            t = perm[u]
+            perm[u] = perm[slots[q]]
+            perm[slots[q]] = t
+            a += 1
+    return 0.5 * (wl + wr)
 
 
 @kernel
@@ -174,16 +195,17 @@ def skeleton(n, leaf_size, ntop, stack):
 
 
 @kernel
-def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nbox, delta, keys):
+def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, delta, keys):
     """Put the particles of the subtree under ``root`` into tree order.
 
     Top-down over the subtree, down to ``max_depth`` levels below ``root``
     (negative: all the way).  ``fresh``: every node gets the longest axis of
     its particles' box and a median selection (a new tree); otherwise each
-    node keeps last step's axis and only the particles that crossed its split
-    are moved (``rebuild_node``).  Subtrees of different nodes are disjoint
-    slot ranges: threads may re-sort them at the same time.  Returns -1 if
-    ``stack`` was short.
+    node keeps last step's axis and split ``nsplit[node]`` and only the
+    particles that crossed it are moved (``rebuild_node``); ``nsplit`` is
+    updated.
+    Subtrees of different nodes are disjoint slot ranges: threads may re-sort
+    them at the same time.  Returns -1 if ``stack`` was short.
     """
     stack[0] = root
     stack[1] = 0
@@ -220,9 +242,9 @@ def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nbox, del
             if hi2 - lo2 > ext:
                 axis = 2
             ntop[nd, AXIS] = axis
-            _split_keyed(pos, perm, axis, s, e, ntop[left, END], keys)
+            nsplit[nd] = _split_keyed(pos, perm, axis, s, e, ntop[left, END], keys)
         else:
-            rebuild_node(pos, perm, ntop, nbox, nd, slots, ids, delta, keys)
+            rebuild_node(pos, perm, ntop, nsplit, nd, slots, ids, delta, keys)
         if sp + 4 > stack.shape[0]:
             return -1
         stack[sp] = ntop[nd, RIGHT]
@@ -245,44 +267,42 @@ def build(pos, leaf_size, perm, ntop, stack):
         return -1
     work = np.zeros(2 * stack.shape[0], np.int64)
     if resort(pos, perm, ntop, 0, -1, True, np.zeros(1, np.int64), np.zeros(1, perm.dtype),
-              work, np.zeros((1, 6)), 0.0, np.zeros(pos.shape[0])) < 0:
+              work, np.zeros(nn), 0.0, np.zeros(pos.shape[0])) < 0:
         return -1
     return nn
 
 
 @kernel(inline=True)
-def rebuild_node(pos, perm, ntop, nbox, nd, slots, ids, delta, keys):
+def rebuild_node(pos, perm, ntop, nsplit, nd, slots, ids, delta, keys):
     """Re-split node nd along its stored axis, moving only the particles that
-    crossed its split and those next to it.
+    crossed its split key and those next to it.
 
-    The split of last step is ``v``, the middle of the gap between the
-    children's boxes in ``nbox`` (last step's bounds).  If no particle is on
-    the wrong side of ``v``, nothing moves.  Otherwise the particles within
+    ``v = nsplit[nd]`` is last step's split key.  If no particle is on the
+    wrong side of ``v``, nothing moves.  Otherwise the particles within
     ``delta`` of ``v`` and the ones on the wrong side of it (however far: a
     particle that wrapped across a periodic boundary) are selected among
     themselves and written back into their own slots, which is a valid split
     when the left slots among them are no fewer than the right half's
     crossers below the band and no more than all but the left half's beyond
-    it.  Else the band is widened (x8, twice), and then the extents of the
-    halves decide (``rebuild_split``).  The rest of the order, and so cache
-    locality, is kept.
+    it.  Else the band is widened (up to 5 times, in proportion to the
+    shortfall), and then the extents of the halves decide (``rebuild_split``).
+    The rest of the order, and so cache locality, is kept; ``nsplit[nd]``
+    gets the new split key.
 
     Why not the extents first: one particle that wrapped across a periodic
     boundary makes the left half's maximum (or the right's minimum) the far
     end of the box, every particle of the other half a crosser, and the node
-    a full selection; on the ring (N = 2e5) that happened along the wrapped
-    particles' paths every step, 40 ms of the threads' time a step.
+    a full selection, all along the wrapped particle's path.
     """
     left = ntop[nd, LEFT]
-    right = ntop[nd, RIGHT]
     s = ntop[nd, START]
     e = ntop[nd, END]
     m = ntop[left, END]
     axis = ntop[nd, AXIS]
-    v = 0.5 * (nbox[left, 3 + axis] + nbox[right, axis])
+    v = nsplit[nd]
     cap = slots.shape[0]
     if np.isfinite(v) and delta >= 0.0:
-        for attempt in range(3):
+        for attempt in range(6):
             lo_b = v - delta
             hi_b = v + delta
             nv = 0
@@ -315,35 +335,34 @@ def rebuild_node(pos, perm, ntop, nbox, nd, slots, ids, delta, keys):
             if nv > cap:
                 break
             if far_r <= nl and nl <= nv - far_l:
-                for q in range(nv):
-                    ids[q] = perm[slots[q]]
-                if 0 < nl < nv:
-                    _select(ids, pos, axis, 0, nv - 1, nl)  # the nl smallest first
-                for q in range(nv):
-                    perm[slots[q]] = ids[q]
+                w = _select_movers(pos, perm, slots, ids, nv, nl, axis, keys, s)
+                # the fixed ones are below lo_b (left) or above hi_b (right)
+                nsplit[nd] = min(max(w, lo_b), hi_b)
                 return
-            delta = max(8.0 * delta, 0.01 * (nbox[nd, 3 + axis] - nbox[nd, axis]))
+            # too few in the band to make up for the crossers (particles that
+            # wrapped go all one way): widen it in proportion, from its density
+            inside = nv - far_l - far_r
+            short = max(far_r - nl, far_l - (nv - nl))
+            grow = max(1.5, 2.0 * (inside + short) / inside) if inside > 0 else 8.0
+            delta = grow * delta if delta > 0.0 else 1e-9 * max(1.0, abs(v))
     mx = -np.inf
     for k in range(s, m):
-        x = pos[perm[k], axis]
-        if x > mx:
-            mx = x
+        mx = max(mx, pos[perm[k], axis])
     mn = np.inf
     for k in range(m, e):
-        x = pos[perm[k], axis]
-        if x < mn:
-            mn = x
-    rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn, keys)
+        mn = min(mn, pos[perm[k], axis])
+    if mx <= mn:
+        nsplit[nd] = 0.5 * (mx + mn)
+    else:
+        nsplit[nd] = rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn, keys)
 
 
 @kernel(inline=True)
 def rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn, keys):
-    """``rebuild_node``'s last resort, given the left half's maximum ``mx``
-    and the right half's minimum ``mn`` along the node's axis: the particles
-    beyond them are selected among themselves, or, if they do not fit the work
-    buffers, the whole node."""
-    if mx <= mn:
-        return
+    """``rebuild_node``'s last resort, given the left half's largest key
+    ``mx`` and the right half's smallest ``mn`` (mx > mn): the particles beyond
+    them are selected among themselves, or, if they do not fit the work
+    buffers, the whole node.  Returns the new split key."""
     left = ntop[nd, LEFT]
     s = ntop[nd, START]
     e = ntop[nd, END]
@@ -363,13 +382,9 @@ def rebuild_split(pos, perm, ntop, nd, slots, ids, mx, mn, keys):
                 slots[nv] = k
             nv += 1
     if nv > cap:
-        _split_keyed(pos, perm, axis, s, e, m, keys)
-        return
-    for q in range(nv):
-        ids[q] = perm[slots[q]]
-    _select(ids, pos, axis, 0, nv - 1, nl)  # the nl smallest violators first
-    for q in range(nv):
-        perm[slots[q]] = ids[q]
+        return _split_keyed(pos, perm, axis, s, e, m, keys)
+    w = _select_movers(pos, perm, slots, ids, nv, nl, axis, keys, s)
+    return min(max(w, mn), mx)
 
 
 @kernel
