@@ -299,16 +299,17 @@ def rebuild_node(pos, perm, ntop, nsplit, nd, slots, ids, delta, keys):
     crossed its split key and those next to it.
 
     ``v = nsplit[nd]`` is last step's split key.  If no particle is on the
-    wrong side of ``v``, nothing moves.  Otherwise the particles within
+    wrong side of ``v``, nothing moves; else a node of at most SMALL_NODE
+    particles is selected whole.  In a larger one the particles within
     ``delta`` of ``v`` and the ones on the wrong side of it (however far: a
     particle that wrapped across a periodic boundary) are selected among
-    themselves and written back into their own slots, which is a valid split
-    when the left slots among them are no fewer than the right half's
-    crossers below the band and no more than all but the left half's beyond
-    it.  Else the band is widened (up to 5 times, in proportion to the
-    shortfall), and then the extents of the halves decide (``rebuild_split``).
-    The rest of the order, and so cache locality, is kept; ``nsplit[nd]``
-    gets the new split key.
+    themselves, and those that change sides swap slots pairwise
+    (``_select_movers``), which is a valid split when the left slots among
+    them are no fewer than the right half's crossers below the band and no
+    more than all but the left half's beyond it.  Else the band is widened
+    (up to 5 times, in proportion to the shortfall), and then the extents of
+    the halves decide (``rebuild_split``).  The rest of the order, and so
+    cache locality, is kept; ``nsplit[nd]`` gets the new split key.
 
     Why not the extents first: one particle that wrapped across a periodic
     boundary makes the left half's maximum (or the right's minimum) the far
