@@ -80,15 +80,18 @@ def say(msg):
 
 
 def parse_locks(text):
-    """[(kind, scale, merge_far)] from 'graph:4,graph:4:unmerged,grid'."""
+    """[(kind, scale, merge_far, schedule)] from 'graph:4,graph:4:unmerged,graph:4:auto,grid'
+    (auto: ``schedule="auto"``, a step's events on one thread when that measured
+    faster)."""
     out = []
     for item in text.split(","):
         kind, _, rest = item.partition(":")
         scale, _, flag = rest.partition(":")
-        if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged"):
+        if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged", "auto"):
             raise SystemExit(f"--locks: unknown lock {item!r} "
-                             "(graph:SCALE, graph:SCALE:unmerged, grid, grid3d)")
-        out.append((kind, float(scale) if scale else 4.0, flag != "unmerged"))
+                             "(graph:SCALE, graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d)")
+        out.append((kind, float(scale) if scale else 4.0, flag != "unmerged",
+                    "auto" if flag == "auto" else "parallel"))
     return out
 
 
@@ -139,6 +142,11 @@ def dem_late(scene, n, code, presteps):
     return after_steps(add_marble(bed, p), sc.physics, p["dt"], presteps)
 
 
+def _on_one(eng):
+    """Steps so far whose events ran on one thread, of a threaded engine."""
+    return eng.scheduler.count[1] if eng.scheduler is not None else 0
+
+
 def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
     say(f"{name}: loading {scene} {state} N={n}")
     if name == "deep_bed":
@@ -148,16 +156,17 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     else:
         sc = scenarios.load(scene, state, n=n, progress=say)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
-    for kind, scale, merge in locks:
+    for kind, scale, merge, schedule in locks:
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
-            "" if merge else " unmerged")
+            "" if merge else " unmerged") + (" auto" if schedule == "auto" else "")
         engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, lock=kind,
-                                scale=scale, policy="exact")
+                                scale=scale, policy="exact", schedule=schedule)
         engines[label].merge_far = merge
     try:
         for eng in engines.values():
             eng.step()
         base = {k: e.totals.copy() for k, e in engines.items()}
+        base_on_one = {k: _on_one(e) for k, e in engines.items()}
         walls = {k: [] for k in engines}
         per_step = {k: [] for k in engines}
         for r in range(repeats):
@@ -190,6 +199,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
                 "violations": int(d[K.S_VIOL] + d[K.S_REACHOUT]), "repairs": int(eng.repairs),
                 "identical": eng.state().sha256() == ref,
+                # schedule auto: the timed steps whose events ran on one thread
+                "events_on_one_thread": _on_one(eng) - base_on_one[label],
                 "locks": {k: v for k, v in (eng.lock_stats or {}).items()
                           if isinstance(v, (int, float, str))}}
         return out
@@ -203,14 +214,15 @@ def print_case(name, res):
           f"{res['steps']} steps x {res['repeats']} repeats")
     print(f"  {'engine':29s} {'ms/step':>9s} {'speedup':>8s} {'(median)':>9s} {'(paired)':>9s} "
           f"{'events/step':>12s} {'concurrency':>12s} {'viol.':>6s} {'repairs':>8s} "
-          f"{'identical':>10s} {'regions':>8s} {'interior':>9s}")
+          f"{'identical':>10s} {'regions':>8s} {'interior':>9s} {'on 1 thread':>12s}")
     for label, r in res["runs"].items():
         lk = r.get("locks", {})
         print(f"  {label:29s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
               f"{r['speedup_median']:9.2f} {r['speedup_paired']:9.2f} {r['events_per_step']:12.0f} "
               f"{r['mean_concurrency']:12.2f} {r['violations']:6d} {r['repairs']:8d} "
               f"{str(r['identical']):>10s} {lk.get('regions', ''):>8} "
-              f"{lk.get('interior_fraction', float('nan')):9.2f}")
+              f"{lk.get('interior_fraction', float('nan')):9.2f} "
+              f"{r.get('events_on_one_thread', 0):12d}")
 
 
 def main():
@@ -220,8 +232,9 @@ def main():
     ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid",
-                    help="graph:SCALE, grid, grid3d, ... (graph:1.2,graph:4,graph:16,grid)")
+    ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto",
+                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, ... "
+                         "(graph:1.2,graph:4,graph:16,grid,graph:4:auto)")
     ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
                     help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
     ap.add_argument("--bed-steps", type=int, default=100,

@@ -3,7 +3,8 @@
     lockgraph scenes
     lockgraph run SCENE [--state early|late] [--n N] [--steps K] [--dt DT] [--seed S]
                         [--threads T] [--lock none|grid|graph] [--scale X]
-                        [--policy exact|paper] [--param KEY=VALUE ...]
+                        [--policy exact|paper] [--schedule parallel|auto]
+                        [--param KEY=VALUE ...]
                         [--save FILE.npz] [--json] [--quiet]
 
     lockgraph compare SCENE --against rebound [--state early|late] [--n N] [--orbits X]
@@ -80,7 +81,7 @@ def cmd_run(args):
     sc = scenarios.load(args.scene, state=args.state, n=args.n, seed=args.seed, dt=args.dt,
                         params=params, progress=progress.message)
     sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=args.threads, lock=args.lock,
-                     scale=args.scale, policy=args.policy)
+                     scale=args.scale, policy=args.policy, schedule=args.schedule)
     sim.run(args.steps, progress=lambda d, t: progress.steps(sim, d, t))
     final = sim.state
     stats = sim.stats
@@ -95,6 +96,8 @@ def cmd_run(args):
         "lock": args.lock,
         "scale": args.scale,
         "policy": args.policy,
+        "schedule": args.schedule,
+        "threaded_event_steps": stats["threaded_event_steps"],
         "events": stats["events"],
         "mean_concurrency": stats["mean_concurrency"],
         "blocked_picks": stats["blocked_picks"],
@@ -311,6 +314,9 @@ def parser():
     r.add_argument("--lock", default="graph", help="none | grid | grid3d | graph (threads > 1)")
     r.add_argument("--scale", type=float, default=4.0, help="lock-graph SCALE")
     r.add_argument("--policy", default="exact", help="exact | paper")
+    r.add_argument("--schedule", default="parallel",
+                   help="parallel | auto: threads > 1, a step's events on the worker threads "
+                        "always, or (exact policy) on one thread when that measured faster")
     r.add_argument("--param", action="append", metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable)")
     r.add_argument("--save", metavar="FILE.npz", help="write the final state (pos, vel, radius, "

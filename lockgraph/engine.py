@@ -17,6 +17,7 @@ from the anchors and the undo journal, so the state is exactly what it was
 after the first half kick; errors then also undo that kick.
 """
 import math
+import time
 
 import numpy as np
 
@@ -30,6 +31,7 @@ from .errors import InelasticCollapseError, InputError, SimulationError, StepToo
 from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
+from .schedule import EventSchedule
 from .state import State
 from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
                    pair_search, permute_mat3, permute_vec, resort, search_tasks, skeleton,
@@ -37,6 +39,7 @@ from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bou
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 POLICIES = ("exact", "paper")
+SCHEDULES = ("parallel", "auto")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
                 K.STALL: "stall"}
@@ -104,6 +107,11 @@ class Engine:
     policy : "exact" | "paper" — exact: causality violations are detected and
         the step redone sequentially, so results equal the sequential engine's
         bit for bit; paper: the paper's rule, violations only counted.
+    schedule : "parallel" | "auto" — with threads > 1, where a step's events run:
+        always on the worker threads, or (exact policy only) on the worker
+        threads or the calling thread alone, whichever measured faster lately
+        (``schedule.EventSchedule``; the result is the same bit for bit).  The
+        other phases of a step run on all threads either way.
     window_events : float — how far an interior event may run ahead of the
         other threads' domains, in units of a domain's mean time between events.
     stall_seconds : float — a step in which no thread completes an event for
@@ -115,8 +123,8 @@ class Engine:
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
-                 threads=1, lock="graph", scale=4.0, policy="exact", window_events=8.0,
-                 stall_seconds=60.0, trace_locks=None):
+                 threads=1, lock="graph", scale=4.0, policy="exact", schedule="parallel",
+                 window_events=8.0, stall_seconds=60.0, trace_locks=None):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
@@ -143,12 +151,20 @@ class Engine:
         scale = float(scale)
         if not (scale > 0 and math.isfinite(scale)):
             raise InputError("scale", f"must be a finite number > 0, got {scale!r}")
+        if schedule not in SCHEDULES:
+            raise InputError("schedule", f"unknown value {schedule!r}; one of "
+                             f"{', '.join(SCHEDULES)}")
+        if schedule == "auto" and policy != "exact":
+            raise InputError("schedule", "'auto' runs some steps' events on one thread, which "
+                             "gives the threads' result only under policy 'exact'")
         if threads > 1 and lock == "none":
             raise InputError("lock", "threads > 1 need lock regions: 'grid', 'grid3d' or 'graph'")
         self.threads = int(threads)
         self.lock = lock
         self.scale = scale
         self.policy = policy
+        self.schedule = schedule
+        self.scheduler = EventSchedule() if schedule == "auto" and threads > 1 else None
         # exact policy, lock graph: regions far from the other domains are merged
         # (``_far_domains``); an attribute, not an option, so benchmarks can compare
         self.merge_far = True
@@ -477,14 +493,26 @@ class Engine:
         self._img_pos, self._img_vel = img_pos, img_vel
         self.par[K.P_T0] = self.time
         log_start = int(self.ctr[K.LCOUNT]) if self.record_events else 0
-        sequential = self.threads == 1
+        on_one = self.threads == 1 or (self.scheduler is not None and self.scheduler.sequential())
+        sequential = on_one
+        spent = 0.0  # in the events (first events on), over every attempt
         while True:
             self._setup(img_pos, img_vel, half)
+            began = time.perf_counter()
             self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
-            if sequential:
+            if sequential and self.threads == 1:
                 K.init_events(parts, nbrs, evq, cfg, st)
+            elif sequential:
+                # events on one thread (schedule auto, or a repair): the first
+                # events on all threads, then one queue over all slots
+                dlo, dhi = self._domains()
+                rows = np.zeros((self.threads, K.NSTAT))
+                self._pmap(K.first_events, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d])
+                                            for d in range(self.threads)])
+                st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
+                K.init_queue(parts, evq)
             else:
                 # each thread: its domain's first events, then the domain's queue
                 dlo, dhi = self._domains()
@@ -506,9 +534,12 @@ class Engine:
                 self._rollback()  # interrupted or a worker failed: undo the step
                 self.ctr[K.LCOUNT] = log_start
                 raise
+            spent += time.perf_counter() - began
             if status == K.OK:
                 if self.record_events:
                     self.log_steps.append((self.steps_done, log_start))
+                if self.scheduler is not None:  # a repair counts as the threads' cost
+                    self.scheduler.record(on_one, spent / max(float(st[K.S_POPS]), 1.0))
                 return st
             bad = int(self.ctr[K.CTR_BAD])
             bad_id = int(self.ids[bad]) if 0 <= bad < self.n else -1

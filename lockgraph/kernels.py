@@ -447,6 +447,21 @@ def init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
     build_queue(tour_t, tour_s, evt, parts[7], hidden, lo, hi)
 
 
+@kernel
+def first_events(parts, nbrs, evq, cfg, st, lo, hi):
+    """``init_events``'s first events for the slots lo..hi-1 only, without a
+    queue: threads share the slots out, then ``init_queue`` builds the one
+    queue of a step whose events run on one thread."""
+    _first_events(parts, nbrs, evq, cfg, st, lo, hi)
+
+
+@kernel
+def init_queue(parts, evq):
+    """The queue over all slots, from their first events."""
+    evt, evp, evc, tour_t, tour_s, hidden = evq
+    build_queue(tour_t, tour_s, evt, parts[7], hidden, 0, parts[0].shape[0])
+
+
 @kernel(inline=True)
 def _first_events(parts, nbrs, evq, cfg, st, lo, hi):
     """The first events of slots lo..hi-1 (offers reach only slots in the range)

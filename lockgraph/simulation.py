@@ -33,8 +33,10 @@ def compile_kernels():
     ]
     for ph in systems:
         Engine(st, ph, 0.05).step()
-    # the threaded worker and the lock structures
-    eng = Engine(st, systems[0], 0.05, threads=2, lock="graph")
+    # the threaded worker and the lock structures; schedule auto's second step
+    # runs its events on one thread (the first events on all threads)
+    eng = Engine(st, systems[0], 0.05, threads=2, lock="graph", schedule="auto")
+    eng.step()
     eng.step()
     eng.close()
     return _time.perf_counter() - t0
@@ -56,6 +58,9 @@ class Simulation:
     policy : "exact" | "paper" — exact (default): causality violations are
         detected and repaired, so any thread count gives the sequential result
         bit for bit; paper: the paper's rule, violations only counted.
+    schedule : "parallel" | "auto" — threads > 1: a step's events always on the
+        worker threads, or (exact policy) on them or on one thread, whichever
+        measured faster lately; same result bit for bit (see ``Engine``).
     window_events : float — how far ahead of the other threads an interior event
         may run (see ``Engine``).
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).
@@ -66,7 +71,7 @@ class Simulation:
 
     def __init__(self, state, physics, dt, *, threads=1, lock="graph", scale=4.0,
                  policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True,
-                 window_events=8.0):
+                 window_events=8.0, schedule="parallel"):
         if not isinstance(state, State):
             raise InputError("state", f"must be a lockgraph.State, got {type(state).__name__}")
         if not isinstance(physics, Physics):
@@ -77,11 +82,12 @@ class Simulation:
         self._engine = Engine(state, physics, dt, skin=skin, leaf_size=leaf_size,
                               collapse_limit=collapse_limit, copy=copy, threads=threads,
                               lock=lock, scale=scale, policy=policy,
-                              window_events=window_events)
+                              window_events=window_events, schedule=schedule)
         self.threads = self._engine.threads
         self.lock = self._engine.lock
         self.scale = self._engine.scale
         self.policy = self._engine.policy
+        self.schedule = self._engine.schedule
         worst, a, b, count = self._engine.initial_overlap(OVERLAP_TOLERANCE)
         if worst > OVERLAP_TOLERANCE:
             raise InputError("state.pos", f"particles {a} and {b} overlap by {worst:.3g} of their "
@@ -123,6 +129,14 @@ class Simulation:
             "repairs": eng.repairs,
             "wait_s": float(st[K.S_WAIT]) / cycles_per_second() if st[K.S_WAIT] else 0.0,
         }
+
+    def _threaded_event_steps(self):
+        eng = self._engine
+        if eng.threads == 1:
+            return 0
+        if eng.scheduler is None:
+            return self.steps
+        return eng.scheduler.count[0]
 
     def close(self):
         """Stop the worker threads (threads > 1); the simulation cannot run after."""
@@ -176,5 +190,8 @@ class Simulation:
             "repairs": self._engine.repairs,
             "wait_s": float(t[K.S_WAIT]) / cycles_per_second() if t[K.S_WAIT] else 0.0,
             "locks": self._engine.lock_stats,
+            "schedule": self.schedule,
+            # steps whose events ran on the worker threads (the rest: on one thread)
+            "threaded_event_steps": self._threaded_event_steps(),
         }
         return out

@@ -122,3 +122,10 @@ def test_threads_json_reports_parallel_statistics(capsys):
         assert k in two
     assert two["threads"] == 2 and two["lock"] == "graph" and two["scale"] == 2.0
     assert two["stats"]["locks"]["regions"] >= 1
+    assert two["schedule"] == "parallel" and two["threaded_event_steps"] == 6
+    auto = run_json(capsys, "ring", "--n", "600", "--steps", "6", "--param", "dispersion=0.003",
+                    "--param", "dt=60", "--threads", "2", "--schedule", "auto")
+    assert auto["state_sha256"] == one["state_sha256"]
+    # each way is measured before any choice: at least one step on the threads
+    # and one on one thread
+    assert auto["schedule"] == "auto" and 1 <= auto["threaded_event_steps"] <= 5

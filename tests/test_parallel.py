@@ -139,6 +139,38 @@ def test_concurrent_search_growths_exact():
             par.close()
 
 
+@pytest.mark.parametrize("name", ["dish_marble", "ring_moonlet"])
+def test_a_repair_rolls_back_and_redoes_the_step_on_one_thread(sequential, name):
+    """The repair path: a threaded step that reports a violation after all its
+    events ran is rolled back from its journal and redone with its events on
+    one thread (first events on all threads, one queue).  Forced here on every
+    other threaded step (real violations are rare): the run keeps the
+    sequential state and collision sequences bit for bit, and counts each
+    repair."""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, threads=2)
+    real = eng._events_parallel
+    forced = []
+
+    def violating_every_other(*args):
+        status = real(*args)
+        if status == K.OK and len(forced) % 2 == 0:
+            forced.append(eng.steps_done)
+            return K.VIOLATION
+        forced.append(None)
+        return status
+
+    eng._events_parallel = violating_every_other
+    try:
+        for _ in range(STEPS[name]):
+            eng.step()
+        assert eng.state().sha256() == want_hash
+        assert per_particle_sequences(eng.events()) == want_seq
+    finally:
+        eng.close()
+    assert eng.repairs == sum(f is not None for f in forced) == (STEPS[name] + 1) // 2
+
+
 def test_each_worker_has_its_own_scratch(monkeypatch):
     """The arrays a worker writes without owning them through its lock regions
     are scratch: each thread must get its own (a shared search stack was the
@@ -356,6 +388,38 @@ def test_options_are_checked():
         Engine(st, ph, 0.05, threads=2, lock="octree")
     with pytest.raises(InputError, match="^policy: unknown value"):
         Engine(st, ph, 0.05, threads=2, policy="optimistic")
+    with pytest.raises(InputError, match="^schedule: unknown value 'fast'"):
+        Engine(st, ph, 0.05, threads=2, schedule="fast")
+    with pytest.raises(InputError, match="^schedule: 'auto' .* only under policy 'exact'"):
+        Engine(st, ph, 0.05, threads=2, schedule="auto", policy="paper")
+
+
+@pytest.mark.parametrize("name", ["ring_moonlet", "dish_marble"])
+def test_auto_schedule_equals_sequential_whichever_way_steps_run(sequential, name):
+    """schedule="auto": the steps whose events run on one thread and those on the
+    worker threads interleave (the scheduler's measurements are overridden to
+    force both ways and the switches between them), and the run still has the
+    sequential state and collision sequences bit for bit."""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, threads=2,
+                 schedule="auto")
+    ways = []
+    try:
+        for k in range(STEPS[name]):
+            # cheaper way: threads, threads, one, one, ...; the probes follow the rule
+            if eng.scheduler.cost[0] is not None and eng.scheduler.cost[1] is not None:
+                cheap_one = (k // 2) % 2 == 1
+                eng.scheduler.cost = [2.0, 1.0] if cheap_one else [1.0, 2.0]
+            before = list(eng.scheduler.count)
+            eng.step()
+            ways.append(eng.scheduler.count[1] > before[1])
+        assert eng.state().sha256() == want_hash
+        assert per_particle_sequences(eng.events()) == want_seq
+    finally:
+        eng.close()
+    assert True in ways and False in ways
+    assert any(a != b for a, b in zip(ways, ways[1:]))  # switched both ways
+    assert eng.scheduler.count == [ways.count(False), ways.count(True)]
 
 
 def test_lock_statistics_of_the_last_threaded_step(sequential):
