@@ -47,7 +47,8 @@ def drop(bed, sc, settings, height):
                              contact, ranks=settings.get("ranks", 1))
     ph = Physics(ph.domain, ph.forces, ph.restitution, CollapseGuard(settings["tc"]))
     return M.penetration(bed, ph, sc.dt, *MARBLE, height, DURATION, "lockgraph",
-                         threads=settings["threads"])
+                         threads=settings["threads"],
+                         schedule=settings.get("schedule", "parallel"))
 
 
 def main():

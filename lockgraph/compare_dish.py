@@ -66,10 +66,12 @@ def measure(times, pos, vel, radius, cylinder_radius, floor_load):
                  "layering": {key: [float(x) for x in val] for key, val in lay.items()}}
 
 
-def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=None):
+def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=None,
+                  schedule="parallel"):
     """Sampled states of a lockgraph run: (times, pos, vel, floor_load, info);
     ``progress(fraction)`` after each sample."""
-    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads, lock=lock, scale=scale)
+    sim = Simulation(sc.state, sc.physics, dt=sc.dt, threads=threads, lock=lock, scale=scale,
+                     schedule=schedule)
     every = max(1, int(round(SAMPLE_EVERY / sc.dt)))
     samples = max(1, int(round(duration / (every * sc.dt))))
     st = sim.state

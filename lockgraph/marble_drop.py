@@ -160,13 +160,14 @@ PROGRESS_EVERY = 30.0  # s of wall time between progress lines of a long drop
 
 
 def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=4.0,
-                   progress=None, rest=None):
+                   progress=None, rest=None, schedule="parallel"):
     """The marble (last particle) through a lockgraph run: (times, z, vz, info).
     ``progress(msg)``, if given, hears about a long run every PROGRESS_EVERY s.
     ``rest = (band, hold)``: stop before ``duration`` once the marble's height
     has stayed within ``band`` (m) of its current value for ``hold`` s (see
     ``stop``); info["stopped_at_rest"] says whether it did."""
-    sim = Simulation(state, physics, dt=dt, threads=threads, lock=lock, scale=scale)
+    sim = Simulation(state, physics, dt=dt, threads=threads, lock=lock, scale=scale,
+                     schedule=schedule)
     every = max(1, int(round(SAMPLE_EVERY / dt)))
     times, z, vz = [state.time], [state.pos[-1, 2]], [state.vel[-1, 2]]
     t_start = state.time
@@ -210,7 +211,7 @@ def drop_dem(state, physics, code, duration, contact, ranks=1, progress=None):
 
 def penetration(bed, physics, dt, marble_radius, marble_density, height, duration,
                 code="lockgraph", contact=None, threads=1, ranks=1, progress=None,
-                lock="graph", scale=4.0, hold=None):
+                lock="graph", scale=4.0, hold=None, schedule="parallel"):
     """Drop the marble from ``height`` into ``bed`` with ``code`` ("lockgraph",
     "lammps" or "liggghts"); returns a dict: depth (m), rest_time (s), H = height
     + depth (m), impact_speed (m/s), wall_s, info.  ``hold`` (s): the rest rule
@@ -222,7 +223,7 @@ def penetration(bed, physics, dt, marble_radius, marble_density, height, duratio
     if code == "lockgraph":
         rest_rule = None if hold is None else (REST_BAND * grain_d, hold)
         t, z, vz, info = drop_lockgraph(state, physics, dt, duration, threads, lock, scale,
-                                        progress, rest_rule)
+                                        progress, rest_rule, schedule)
     else:
         t, z, vz, info = drop_dem(state, physics, code, duration,
                                   contact or dem.Contact("hertz", 1e7, 20), ranks, progress)
