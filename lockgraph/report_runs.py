@@ -50,7 +50,7 @@ def _chunked(advance, steps, progress):
 
 
 def ring_lockgraph(scene, n, seed, orbits, state="late", dt_factor=1.0, threads=1, lock="graph",
-                   scale=4.0, policy="exact", progress=None):
+                   scale=4.0, policy="exact", progress=None, schedule="parallel"):
     """Lockgraph on a ring scene's ``state`` for ``orbits`` orbits at
     dt = dt_factor x the scene's dt: collisions, mean sigma_x (m/s) over
     ``SAMPLES`` snapshots, overlaps, and the parallel engine's statistics."""
@@ -58,7 +58,7 @@ def ring_lockgraph(scene, n, seed, orbits, state="late", dt_factor=1.0, threads=
     dt = sc.dt * dt_factor
     _, steps = _orbit_steps(sc, orbits, dt)
     sim = Simulation(sc.state, sc.physics, dt=dt, threads=threads, lock=lock, scale=scale,
-                     policy=policy)
+                     policy=policy, schedule=schedule)
     try:
         snaps = sampled(_chunked(sim.run, steps, progress),
                         lambda: state_arrays(sim), sc.physics.domain, steps, SAMPLES)
@@ -121,14 +121,15 @@ def _dish_summary(sc, times, pos, vel, load, info):
 
 
 def dish_lockgraph(n, seed, time, tc, cylinder_radius, threads=1, lock="graph", scale=4.0,
-                   progress=None):
+                   progress=None, schedule="parallel"):
     """Lockgraph on the dish from its falling block for ``time`` s with the
     collapse guard's ``tc`` (s): kinetic energy every 10 ms, settling time,
     bed observables."""
     sc = _dish(n, seed, cylinder_radius, tc)
     progress(0.0, "running")
     times, pos, vel, load, info = run_lockgraph(sc, time, threads=threads, lock=lock,
-                                                scale=scale, progress=progress)
+                                                scale=scale, progress=progress,
+                                                schedule=schedule)
     out = _dish_summary(sc, times, pos, vel, load, info)
     out["state_hash"] = state_sha256(pos[-1], vel[-1])  # 2 threads must reproduce it bit for bit
     return out
@@ -151,7 +152,7 @@ def dish_dem(code, n, seed, time, stiffness, cylinder_radius, dt_fraction=20.0, 
 
 def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_density,
                 tc=None, threads=1, lock="graph", scale=4.0, stiffness=1e7, dt_fraction=20.0,
-                ranks=1, progress=None):
+                ranks=1, progress=None, schedule="parallel"):
     """The marble dropped from ``height`` (m) into a bed settled by LAMMPS:
     penetration depth (m), time to rest (s), wall time."""
     params = {"cylinder_radius": cylinder_radius}
@@ -162,7 +163,8 @@ def marble_drop(code, n, seed, height, cylinder_radius, marble_radius, marble_de
     if code == "lockgraph":
         ph = Physics(ph.domain, ph.forces, ph.restitution, CollapseGuard(tc))
         r = M.penetration(bed, ph, sc.dt, marble_radius, marble_density, height,
-                          MARBLE_DURATION, "lockgraph", threads=threads, lock=lock, scale=scale)
+                          MARBLE_DURATION, "lockgraph", threads=threads, lock=lock, scale=scale,
+                          schedule=schedule)
     else:
         r = M.penetration(bed, ph, sc.dt, marble_radius, marble_density, height,
                           MARBLE_DURATION, code, dem.Contact("hertz", stiffness, dt_fraction),
