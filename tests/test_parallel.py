@@ -63,6 +63,18 @@ def run(sc, steps, **opts):
         eng.close()
 
 
+def steps_match(eng, steps, want_hash, want_seq):
+    """Run ``steps`` steps of ``eng`` (then close it): its state and collision
+    sequences must be the sequential run's."""
+    try:
+        for _ in range(steps):
+            eng.step()
+        assert eng.state().sha256() == want_hash
+        assert per_particle_sequences(eng.events()) == want_seq
+    finally:
+        eng.close()
+
+
 @pytest.fixture(scope="module")
 def sequential():
     """Sequential reference runs, computed once per scene and state."""
@@ -161,13 +173,7 @@ def test_a_repair_rolls_back_and_redoes_the_step_on_one_thread(sequential, name)
         return status
 
     eng._events_parallel = violating_every_other
-    try:
-        for _ in range(STEPS[name]):
-            eng.step()
-        assert eng.state().sha256() == want_hash
-        assert per_particle_sequences(eng.events()) == want_seq
-    finally:
-        eng.close()
+    steps_match(eng, STEPS[name], want_hash, want_seq)
     assert eng.repairs == sum(f is not None for f in forced) == (STEPS[name] + 1) // 2
 
 
@@ -206,13 +212,7 @@ def test_random_pauses_in_workers_change_nothing(sequential, name):
         eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, threads=2,
                      lock="graph", scale=2.0)
         eng.workers.jitter = seed
-        try:
-            for _ in range(STEPS[name]):
-                eng.step()
-            assert eng.state().sha256() == want_hash
-            assert per_particle_sequences(eng.events()) == want_seq
-        finally:
-            eng.close()
+        steps_match(eng, STEPS[name], want_hash, want_seq)
 
 
 def random_gas(n, seed, radius_spread):
