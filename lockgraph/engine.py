@@ -502,11 +502,9 @@ class Engine:
             self.ctr[K.LCOUNT] = log_start
             st = np.zeros(K.NSTAT)
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
-            if sequential and self.threads == 1:
-                K.init_events(parts, nbrs, evq, cfg, st)
-            elif sequential:
-                # events on one thread (schedule auto, or a repair): the first
-                # events on all threads, then one queue over all slots
+            if sequential:
+                # events on one thread (one thread in all, schedule auto or a
+                # repair): the first events on all threads, then one queue
                 dlo, dhi = self._domains()
                 rows = np.zeros((self.threads, K.NSTAT))
                 self._pmap(K.first_events, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d])

@@ -421,27 +421,9 @@ def _offer(i, t, e, key_e, evt, evp, evc, ids, ncoll):
 
 
 @kernel
-def init_events(parts, nbrs, evq, cfg, st):
-    """Predict every particle's first event of the step and build the queue.
-
-    Each candidate pair is predicted once and offered to both particles; the
-    outcome equals ``predict`` run on every particle (same minimum by
-    (time, partner id, image), walls after pairs).  On the way it measures the
-    largest relative overlap among the pairs (all particles are at the step
-    start) into ``st[S_MAXOV]``.
-    """
-    evt, evp, evc, tour_t, tour_s, hidden = evq
-    n = parts[0].shape[0]
-    _first_events(parts, nbrs, evq, cfg, st, 0, n)
-    build_queue(tour_t, tour_s, evt, parts[7], hidden, 0, n)
-
-
-@kernel
 def init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
-    """Threaded ``init_events`` for the slots lo..hi-1 of one domain, and that
-    domain's queue (``tour_t``, ``tour_s``).  Every pending event equals
-    ``init_events``'s: a pair across the range's edge is predicted by each
-    side, from its lower slot as ``init_events`` does, so the bits agree."""
+    """``first_events`` for the slots lo..hi-1 of one domain, and that
+    domain's queue (``tour_t``, ``tour_s``)."""
     evt, evp, evc, tour_t_, tour_s_, hidden = evq
     _first_events(parts, nbrs, evq, cfg, st, lo, hi)
     build_queue(tour_t, tour_s, evt, parts[7], hidden, lo, hi)
@@ -449,9 +431,16 @@ def init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
 
 @kernel
 def first_events(parts, nbrs, evq, cfg, st, lo, hi):
-    """``init_events``'s first events for the slots lo..hi-1 only, without a
-    queue: threads share the slots out, then ``init_queue`` builds the one
-    queue of a step whose events run on one thread."""
+    """Predict the first event of the step of every slot lo..hi-1 (no queue),
+    and measure the largest relative overlap among their pairs (all particles
+    are at the step start) into ``st[S_MAXOV]``.
+
+    Each candidate pair is predicted once and offered to both particles; the
+    outcome equals ``predict`` run on every particle (same minimum by (time,
+    partner id, image), walls after pairs).  A pair across the range's edge
+    is predicted by each side, from its lower slot, so the bits do not depend
+    on how the slots are shared out among threads.  A step whose events run
+    on one thread then builds its one queue with ``init_queue``."""
     _first_events(parts, nbrs, evq, cfg, st, lo, hi)
 
 
@@ -484,7 +473,7 @@ def _first_events(parts, nbrs, evq, cfg, st, lo, hi):
             if j < i:
                 if j >= lo:
                     continue  # the pair was offered from j's list
-                # j is another domain's: the pair as init_events predicts it, from j
+                # j is another range's: predicted from j, as a range holding both does
                 t = pair_time(pos, vel, j, i, 26 - img, img_pos, img_vel, rad[j] + ri, 0.0,
                               t_end)
                 if t < INF:

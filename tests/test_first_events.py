@@ -1,5 +1,6 @@
 """The threaded engine's first events (``kernels.init_range``, one call per
-domain) against the sequential ``init_events``: bit for bit the same pending
+domain) against ``first_events`` over all slots and ``init_queue`` (the
+sequential engine's): bit for bit the same pending
 event for every particle, the same largest overlap, and each domain's queue
 the tournament ``build_queue`` makes over that domain's slots.  Domains are
 cut at arbitrary slots, so pairs across a cut are exercised in both orders."""
@@ -31,7 +32,8 @@ def test_domain_first_events_equal_the_sequential_ones(name, cuts):
     eng._setup(img_pos, img_vel, half)
     parts, step, tree, nbrs, evq, jour, cfg_ = eng._bundles(img_pos, img_vel, full)
     st = np.zeros(K.NSTAT)
-    K.init_events(parts, nbrs, evq, cfg_, st)
+    K.first_events(parts, nbrs, evq, cfg_, st, 0, eng.n)
+    K.init_queue(parts, evq)
     want = (eng.evt.copy(), eng.evp.copy(), eng.evc.copy())
     assert np.isfinite(want[0]).any()  # some particle has an event this step
     n = eng.n
