@@ -105,6 +105,7 @@ def cmd_run(args):
         "collisions": stats["collisions"],
         "pair_collisions": stats["pair_collisions"],
         "wall_collisions": stats["wall_collisions"],
+        "guarded_impacts": stats["guarded_impacts"],
         "wall_s": stats["wall_s"],
         "compile_s": stats["compile_s"],
         "events_per_s": stats["events_per_s"],

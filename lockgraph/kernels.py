@@ -58,7 +58,7 @@ NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
  S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT,
- S_ECYC, S_XFLUX) = range(20)
+ S_ECYC, S_XFLUX, S_GUARDED) = range(21)
 NSTAT = 24
 # status codes
 (OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL,
@@ -290,6 +290,7 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
         tc = par[P_TC]
         if tc > 0.0 and (now - tlast[i] < tc or now - tlast[j] < tc):
             e = 1.0
+            st[S_GUARDED] += 1  # made elastic by the collapse guard
         else:
             e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -vn)
         mi = mass[i]

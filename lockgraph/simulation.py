@@ -216,6 +216,8 @@ class Simulation:
             "collisions": pairs + walls,
             "pair_collisions": pairs,
             "wall_collisions": walls,
+            # pair impacts the collapse guard made elastic (within tc of a body's last)
+            "guarded_impacts": int(t[K.S_GUARDED]),
             "stale_events": int(t[K.S_STALE]),
             "grazing_events": int(t[K.S_GRAZE]),
             "search_growths": int(t[K.S_GROW]),

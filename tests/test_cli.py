@@ -8,7 +8,8 @@ import numpy as np
 
 from lockgraph.cli import main
 
-REQUIRED = ["scene", "state", "n", "steps", "threads", "lock", "scale", "collisions", "wall_s",
+REQUIRED = ["scene", "state", "n", "steps", "threads", "lock", "scale", "collisions",
+            "guarded_impacts", "wall_s",
             "compile_s", "events_per_s", "max_overlap", "violations", "state_sha256",
             "peak_rss_mb"]
 
