@@ -1,6 +1,6 @@
 """Speed against accuracy for stopping the marble: lockgraph (1 and 2 threads,
-several collapse-guard times) against LAMMPS (1 rank, 2 MPI ranks) and
-LIGGGHTS at several stiffnesses, from the same settled bed.
+several collapse-guard times, the velocity guard) against LAMMPS (1 rank,
+2 MPI ranks) and LIGGGHTS at several stiffnesses, from the same settled bed.
 
     python benchmarks/marble_speed_accuracy.py [--seeds 2] [--height 0.08] [--quick] [--out DIR]
 
@@ -26,11 +26,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from benchmarks.common import chart, write_csv  # noqa: E402
-from benchmarks.dem_speed_accuracy import methods, say  # noqa: E402
+from benchmarks.dem_speed_accuracy import guard, methods, say  # noqa: E402
 from lockgraph import dem  # noqa: E402
 from lockgraph import marble_drop as M  # noqa: E402
 from lockgraph.physics import Physics  # noqa: E402
-from lockgraph.restitution import CollapseGuard  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
 PARAMS = {"cylinder_radius": 0.005}
@@ -45,7 +44,7 @@ def drop(bed, sc, settings, height):
         contact = dem.Contact("hertz", settings["E"], settings.get("frac", 20.0))
         return M.penetration(bed, ph, sc.dt, *MARBLE, height, DURATION, settings["code"],
                              contact, ranks=settings.get("ranks", 1))
-    ph = Physics(ph.domain, ph.forces, ph.restitution, CollapseGuard(settings["tc"]))
+    ph = Physics(ph.domain, ph.forces, ph.restitution, guard(settings))
     return M.penetration(bed, ph, sc.dt, *MARBLE, height, DURATION, "lockgraph",
                          threads=settings["threads"],
                          schedule=settings.get("schedule", "parallel"))

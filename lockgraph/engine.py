@@ -31,6 +31,7 @@ from .errors import InelasticCollapseError, InputError, SimulationError, StepToo
 from .events import tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
+from .restitution import CollapseGuard, VelocityGuard
 from .schedule import EventSchedule
 from .state import State
 from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
@@ -211,7 +212,7 @@ class Engine:
         self.tl = take(state.t_local)
         self.ncoll = take(state.ncoll)
         # last-collision times matter only to the collapse guard: not kept otherwise
-        self.guarded = self.physics.guard is not None
+        self.guarded = isinstance(self.physics.guard, CollapseGuard)
         self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
         self.tlast_in = None if self.guarded else state.t_last.copy() if copy else state.t_last
         self.ids = np.arange(n, dtype=np.int32)
@@ -290,8 +291,10 @@ class Engine:
         par[K.P_E] = e
         par[K.P_VC] = vc
         par[K.P_EXP] = expo
-        par[K.P_TC] = ph.guard.tc if ph.guard is not None else -1.0
-        par[K.P_WMIN] = 0.5 * ph.g * ph.guard.tc if ph.guard is not None else 0.0
+        tc = ph.guard.tc if isinstance(ph.guard, CollapseGuard) else -1.0
+        par[K.P_TC] = tc
+        par[K.P_WMIN] = 0.5 * ph.g * tc if tc > 0 else 0.0
+        par[K.P_VMIN] = ph.guard.v_min if isinstance(ph.guard, VelocityGuard) else -1.0
         # No pair may be in reach of two images of each other (nor a particle of its
         # own image): the two largest reaches must sum to less than half the
         # shortest period.  Radii alone must already fit.

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 from .domains import Dish, PeriodicCube, ShearingSheet
 from .errors import InputError
 from .forces import Gravity, Hill
-from .restitution import Bridges, CollapseGuard, Constant
+from .restitution import Bridges, CollapseGuard, Constant, VelocityGuard
 
 
 @dataclass(frozen=True)
@@ -15,7 +15,7 @@ class Physics:
     domain : ShearingSheet | Dish | PeriodicCube
     forces : tuple of Gravity / Hill (each at most once)
     restitution : Constant | Bridges
-    guard : CollapseGuard or None
+    guard : CollapseGuard | VelocityGuard | None
     """
     domain: object
     forces: tuple = ()
@@ -35,8 +35,9 @@ class Physics:
             raise InputError("physics.forces", "each force may appear once")
         if not isinstance(self.restitution, (Constant, Bridges)):
             raise InputError("physics.restitution", f"unknown law {self.restitution!r}")
-        if self.guard is not None and not isinstance(self.guard, CollapseGuard):
-            raise InputError("physics.guard", f"must be a CollapseGuard or None, got {self.guard!r}")
+        if self.guard is not None and not isinstance(self.guard, (CollapseGuard, VelocityGuard)):
+            raise InputError("physics.guard", f"must be a CollapseGuard, a VelocityGuard or "
+                             f"None, got {self.guard!r}")
         hill = self.hill
         if isinstance(self.domain, ShearingSheet):
             if hill is None:
@@ -75,5 +76,5 @@ class Physics:
             "forces": [type(f).__name__.lower() for f in self.forces],
             "restitution": {"law": type(self.restitution).__name__.lower(),
                             **self.restitution.__dict__},
-            "collapse_guard": None if self.guard is None else self.guard.tc,
+            "collapse_guard": None if self.guard is None else self.guard.__dict__,
         }

@@ -13,6 +13,17 @@
   for tc from 1e-4 to 1e-6 s).  Instead the floor returns a body at no less
   than ``g tc / 2``, the speed of a hop lasting tc, which ends the floor's own
   Zeno sequence of ever faster bounces.
+* ``VelocityGuard(v_min)``: impacts (pair, floor and cylinder) whose normal
+  approach speed is below ``v_min`` are elastic, the others follow the law.
+  Collapse needs relative speeds that shrink without end, so a floor on the
+  dissipating speeds prevents it, as velocity-dependent restitution does in
+  McNamara & Falcon (2005, Phys. Rev. E 71, 031302), whose e reaches 1 below
+  about sqrt(g d).  Unlike the TC model it keeps dissipating in a dense bed
+  whose grains collide often but fast: in the settling dish 95-99.8 % of the
+  impacts came within tc = 1e-4 s of a grain's last one and were made elastic
+  by the TC model.  The price: motion below ``v_min`` is never damped, so a
+  settled bed keeps bouncing (the settling dish at 0.35 s: rms 2-6 mm/s for
+  v_min from 3 mm/s to 2 cm/s, against 1 mm/s under the TC model at 1e-4 s).
 """
 from dataclasses import dataclass
 
@@ -67,6 +78,15 @@ class CollapseGuard:
 
     def __post_init__(self):
         object.__setattr__(self, "tc", _positive("collapse_guard.tc", self.tc))
+
+
+@dataclass(frozen=True)
+class VelocityGuard:
+    """Impacts whose normal approach speed is below ``v_min`` (m/s) are elastic."""
+    v_min: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "v_min", _positive("collapse_guard.v_min", self.v_min))
 
 
 @kernel

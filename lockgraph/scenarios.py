@@ -29,7 +29,7 @@ from .errors import ScenarioError
 from .forces import Gravity, Hill
 from .generators import GENERATORS, add_marble
 from .physics import Physics
-from .restitution import Bridges, CollapseGuard, Constant
+from .restitution import Bridges, CollapseGuard, Constant, VelocityGuard
 from .state import State
 
 ENGINE_VERSION = "1"  # bump when a change alters trajectories: invalidates cached late states
@@ -39,6 +39,9 @@ PHYSICS_KEYS = {"domain", "forces", "restitution", "collapse_guard"}
 DOMAINS = {"shearing_sheet": {"omega"}, "dish": {"cylinder_radius"}, "periodic_cube": set()}
 FORCES = {"hill": {"omega"}, "gravity": {"g"}}
 LAWS = {"constant": {"e"}, "bridges": {"v_c", "exponent"}}
+# physics.collapse_guard: false, true (= "tc"), "tc" or "velocity", and the
+# parameters each needs
+GUARDS = {"tc": {"tc"}, "velocity": {"v_guard"}}
 LATE = {"orbits": {"late_orbits"}, "settle": {"settle_speed", "settle_time_max"},
         "time": {"late_time"}}
 STEP_KEYS = {"dt"}
@@ -87,8 +90,9 @@ class SceneFile:
         for f in self.physics["forces"]:
             need |= FORCES[f]
         need |= LAWS[self.physics["restitution"]]
-        if self.physics["collapse_guard"]:
-            need.add("tc")
+        guard = guard_kind(self.physics)
+        if guard is not None:
+            need |= GUARDS[guard]
         return need, opt
 
 
@@ -132,8 +136,10 @@ def read(name):
     for f in phys["forces"]:
         _choice(where, "physics.forces", f, FORCES)
     _choice(where, "physics.restitution", phys.get("restitution"), LAWS)
-    if not isinstance(phys["collapse_guard"], bool):
-        raise ScenarioError(f"{where}: physics.collapse_guard", "must be true or false")
+    if not isinstance(phys["collapse_guard"], bool) and phys["collapse_guard"] not in GUARDS:
+        raise ScenarioError(f"{where}: physics.collapse_guard",
+                            f"unknown value {phys['collapse_guard']!r}; true, false or one "
+                            f"of {sorted(GUARDS)}")
     _choice(where, "generator", doc["generator"], GENERATORS)
     _choice(where, "late", doc["late"], LATE)
     scene = SceneFile(doc["name"], doc.get("description", ""), doc["generator"], doc["late"],
@@ -149,6 +155,14 @@ def read(name):
     for k, v in scene.params.items():
         scene.params[k] = _check_value(f"{where}: params.{k}", k, v)
     return scene
+
+
+def guard_kind(physics):
+    """The collapse guard a scene's [physics] table declares: None, "tc" or "velocity"."""
+    g = physics.get("collapse_guard", False)
+    if g is False:
+        return None
+    return "tc" if g is True else g
 
 
 def _choice(where, key, value, options):
@@ -228,7 +242,9 @@ def build_physics(scene, p, geometry):
         law = Constant(p["e"])
     else:
         law = Bridges(p["v_c"], p["exponent"])
-    guard = CollapseGuard(p["tc"]) if ph["collapse_guard"] else None
+    kind = guard_kind(ph)
+    guard = (None if kind is None else CollapseGuard(p["tc"]) if kind == "tc"
+             else VelocityGuard(p["v_guard"]))
     return Physics(domain, tuple(forces), law, guard)
 
 

@@ -9,7 +9,7 @@ from lockgraph import scenarios
 from lockgraph.engine import Engine
 from lockgraph.errors import InelasticCollapseError
 from lockgraph.physics import Physics
-from lockgraph.restitution import Bridges, CollapseGuard, Constant, coefficient
+from lockgraph.restitution import Bridges, CollapseGuard, Constant, VelocityGuard, coefficient
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
 
@@ -118,3 +118,57 @@ def test_guard_makes_a_resting_bed_elastic_at_a_cost_growing_as_tc_shrinks():
     # measured 7.4x for the 10x smaller tc (22 -> 16 impacts per grain per tc
     # window); more than 4x: the cost grows at least as tc^-0.6
     assert rate[1e-5] > 4 * rate[1e-4]
+
+
+@pytest.mark.parametrize("speed,elastic", [(0.009, True), (0.011, False)])
+def test_velocity_guard_makes_slow_impacts_elastic(speed, elastic):
+    """Head-on, equal masses: an impact slower than v_min = 0.01 m/s is elastic
+    (the spheres swap velocities) and counted as guarded; a faster one has e."""
+    st = State([[-1.0, 0, 0], [0.5, 0, 0]], [[speed, 0, 0], [0, 0, 0]], np.full(2, 0.5),
+               np.ones(2))
+    eng = Engine(st, cube(e=0.5, guard=VelocityGuard(0.01)), 500.0)
+    eng.step()
+    v = eng.state().vel[:, 0]
+    e = 1.0 if elastic else 0.5
+    assert v == pytest.approx([0.5 * speed * (1 - e), 0.5 * speed * (1 + e)], rel=1e-12)
+    assert int(eng.totals[K.S_GUARDED]) == (1 if elastic else 0)
+    assert int(eng.totals[K.S_PAIR]) == 1
+
+
+def test_velocity_guard_prevents_collapse_on_the_floor():
+    """A grain dropped on the floor with e = 0.5: its bounces lose speed until
+    they are slower than v_min, then stay elastic — no Zeno sequence, and it
+    keeps hopping at most v_min^2 / (2 g) high, at least e v_min fast."""
+    from lockgraph.domains import Dish
+    from lockgraph.forces import Gravity
+
+    v_min = 0.01
+    ph = Physics(Dish(0.01), (Gravity(9.81),), Constant(0.5), VelocityGuard(v_min))
+    st = State([[0.0, 0.0, 0.0012]], [[0, 0, 0]], [0.001], [1.0])
+    sim = Simulation(st, ph, dt=0.005, collapse_limit=2000)
+    sim.run(100)
+    s = sim.state
+    assert s.pos[0, 2] >= 0.001 - 1e-15
+    # mechanical energy above contact: a hop below v_min, at least e * v_min
+    energy = 0.5 * s.vel[0, 2] ** 2 + 9.81 * (s.pos[0, 2] - 0.001)
+    assert 0.5 * (0.5 * v_min) ** 2 * (1 - 1e-9) <= energy < 0.5 * v_min ** 2
+    assert sim.stats["max_collisions_per_step"] < 100  # hops of >= 2 e v_min / g = 1 ms
+
+
+def test_scene_declares_the_velocity_guard(tmp_path):
+    from lockgraph.errors import ScenarioError
+
+    text = open(scenarios.find("dish")).read()
+    assert "collapse_guard = true" in text
+    path = tmp_path / "dish_v.toml"
+    path.write_text(text.replace("collapse_guard = true", 'collapse_guard = "velocity"')
+                    .replace("tc = 1.0e-4", "v_guard = 0.01"))
+    sc = scenarios.load(str(path), "early", n=50)
+    assert sc.physics.guard == VelocityGuard(0.01)
+    path.write_text(text.replace("collapse_guard = true", 'collapse_guard = "speed"'))
+    with pytest.raises(ScenarioError, match="physics.collapse_guard"):
+        scenarios.load(str(path), "early", n=50)
+    # the velocity guard's parameter without it is an unknown key
+    path.write_text(text.replace("tc = 1.0e-4", "tc = 1.0e-4\nv_guard = 0.01"))
+    with pytest.raises(ScenarioError, match="v_guard"):
+        scenarios.load(str(path), "early", n=50)
