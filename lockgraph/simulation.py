@@ -42,13 +42,14 @@ def _compile_sequential():
         Engine(st, ph, 0.05).step()
 
 
-def _compile_threaded():
-    """The threaded engine's kernels (the worker, the lock structures) and
-    schedule auto's steps whose events run on one thread (its second step)."""
+def _compile_threaded(steps=2):
+    """The threaded engine's kernels (the worker, the lock structures: its first
+    step) and schedule auto's steps whose events run on one thread (its
+    second: the event loop of ``_compile_sequential``)."""
     st, systems = _tiny()
     eng = Engine(st, systems[0], 0.05, threads=2, lock="graph", schedule="auto")
-    eng.step()
-    eng.step()
+    for _ in range(steps):
+        eng.step()
     eng.close()
 
 
@@ -83,7 +84,7 @@ def compile_kernels(processes=2):
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in [env.get("PYTHONPATH")] if p])
         helper = subprocess.Popen(
-            [sys.executable, "-c", f"from {__name__} import _compile_threaded; _compile_threaded()"],
+            [sys.executable, "-c", f"from {__name__} import _compile_threaded; _compile_threaded(1)"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:
         _compile_sequential()
