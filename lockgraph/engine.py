@@ -211,7 +211,7 @@ class Engine:
         self.mass = take(state.mass)
         self.tl = take(state.t_local)
         self.ncoll = take(state.ncoll)
-        # last-collision times matter only to the collapse guard: not kept otherwise
+        # last-collision times matter only to the TC guard: not kept otherwise
         self.guarded = isinstance(self.physics.guard, CollapseGuard)
         self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
         self.tlast_in = None if self.guarded else state.t_last.copy() if copy else state.t_last

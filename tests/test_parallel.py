@@ -43,7 +43,7 @@ LOCKS = [("grid", 4.0), ("graph", 1.2), ("graph", 2.0), ("graph", 4.0), ("graph"
 
 
 class Sequences:
-    """Every particle's collision sequence: rows (particle, step, t, partner,
+    """Every particle's collision sequence, from an engine's event log: rows (particle, step, t, partner,
     image of the partner seen from the particle), sorted, so two runs have the
     same per-particle sequences exactly when their rows are equal (``==``).
     The same comparison as a {particle: sorted [(step, t, partner, image)]}
@@ -63,11 +63,6 @@ class Sequences:
 
     def __eq__(self, other):
         return all(np.array_equal(x, y) for x, y in zip(self.rows, other.rows))
-
-
-def per_particle_sequences(events):
-    """The per-particle collision sequences of an engine's event log (``Sequences``)."""
-    return Sequences(events)
 
 
 def test_sequences_compare_per_particle_and_ignore_the_log_order():
@@ -92,7 +87,7 @@ def run(sc, steps, **opts):
         for _ in range(steps):
             eng.step()
         st = eng.state()
-        return st.sha256(), per_particle_sequences(eng.events()), eng, st
+        return st.sha256(), Sequences(eng.events()), eng, st
     finally:
         eng.close()
 
@@ -104,7 +99,7 @@ def steps_match(eng, steps, want_hash, want_seq):
         for _ in range(steps):
             eng.step()
         assert eng.state().sha256() == want_hash
-        assert per_particle_sequences(eng.events()) == want_seq
+        assert Sequences(eng.events()) == want_seq
     finally:
         eng.close()
 
@@ -448,7 +443,7 @@ def test_auto_schedule_equals_sequential_whichever_way_steps_run(sequential, nam
             eng.step()
             ways.append(eng.scheduler.count[1] > before[1])
         assert eng.state().sha256() == want_hash
-        assert per_particle_sequences(eng.events()) == want_seq
+        assert Sequences(eng.events()) == want_seq
     finally:
         eng.close()
     assert True in ways and False in ways
