@@ -6,8 +6,53 @@ status codes; without NRT, passing arrays between compiled functions costs no
 atomic reference-count updates (measured on the event loop: 5.2 -> 1.4 us per
 collision at N = 32,000).  ``inline=True`` also inlines the function into its
 callers at numba-IR level (for the small, hot ones).
+
+The compiled kernels are cached on disk in ``KERNEL_CACHE``, a directory named
+for a hash of the sources of every module that uses numba.  Why: numba checks
+a cached function against its own file's time stamp only, so a kernel that
+inlines or calls a kernel of another module kept its old compiled body after
+that module changed — measured: the threaded worker (``parallel.py``) cached
+before the velocity guard was added to ``kernels.py`` ran without it.
 """
+import hashlib
+import os
+from pathlib import Path
+
 from numba import njit
+from numba.core import config
+
+HERE = Path(__file__).resolve().parent
+
+
+def source_key(root=HERE):
+    """sha256 (16 hex digits) of the modules in ``root`` (the package) that use numba."""
+    h = hashlib.sha256()
+    for p in sorted(Path(root).glob("*.py")):
+        text = p.read_bytes()
+        if p.name == "_jit.py" or b"numba" in text or b"_jit import" in text:
+            h.update(p.name.encode() + b"\0" + text + b"\0")
+    return h.hexdigest()[:16]
+
+
+def _cache_root():
+    # numba's own setting if the user made one, else lockgraph's cache
+    if config.CACHE_DIR:
+        return Path(config.CACHE_DIR)
+    return Path(os.environ.get("LOCKGRAPH_CACHE", Path.home() / ".cache" / "lockgraph"))
+
+
+KERNEL_CACHE = str(_cache_root() / "kernels" / source_key())
+
+
+def _njit(f, opts):
+    # numba picks a function's cache directory when it is decorated: point it
+    # at KERNEL_CACHE for lockgraph's kernels only, not for the process
+    old = config.CACHE_DIR
+    config.CACHE_DIR = KERNEL_CACHE
+    try:
+        return njit(**opts)(f)
+    finally:
+        config.CACHE_DIR = old
 
 
 def kernel(fn=None, *, inline=False):
@@ -15,5 +60,5 @@ def kernel(fn=None, *, inline=False):
     if inline:
         opts["inline"] = "always"
     if fn is None:
-        return lambda f: njit(**opts)(f)
-    return njit(**opts)(fn)
+        return lambda f: _njit(f, opts)
+    return _njit(fn, opts)

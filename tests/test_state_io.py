@@ -63,3 +63,25 @@ def test_sha256_is_of_pos_then_vel():
     st, _ = evolved()
     h = hashlib.sha256(st.pos.tobytes() + st.vel.tobytes()).hexdigest()
     assert st.sha256() == h
+
+
+def test_kernel_cache_is_keyed_by_the_numba_modules_sources(tmp_path):
+    """Compiled kernels are cached per version of every numba module's source:
+    changing one kernel module moves all kernels to a fresh directory (numba
+    alone would keep a caller's stale inlined copy); other modules do not."""
+    import shutil
+
+    from lockgraph import _jit, parallel
+
+    assert _jit.KERNEL_CACHE.endswith(_jit.source_key())
+    assert parallel.worker._cache._cache_path.startswith(_jit.KERNEL_CACHE)
+    for p in _jit.HERE.glob("*.py"):
+        shutil.copy(p, tmp_path / p.name)
+    key = _jit.source_key(tmp_path)
+    assert key == _jit.source_key()
+    cli = tmp_path / "cli.py"
+    cli.write_text(cli.read_text() + "\n# a comment\n")
+    assert _jit.source_key(tmp_path) == key  # no numba in it
+    k = tmp_path / "kernels.py"
+    k.write_text(k.read_text() + "\n# a comment\n")
+    assert _jit.source_key(tmp_path) != key
