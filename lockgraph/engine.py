@@ -294,7 +294,9 @@ class Engine:
         tc = ph.guard.tc if isinstance(ph.guard, CollapseGuard) else -1.0
         par[K.P_TC] = tc
         par[K.P_WMIN] = 0.5 * ph.g * tc if tc > 0 else 0.0
-        par[K.P_VMIN] = ph.guard.v_min if isinstance(ph.guard, VelocityGuard) else -1.0
+        vg = isinstance(ph.guard, VelocityGuard)
+        par[K.P_VMIN] = ph.guard.v_min if vg else -1.0
+        par[K.P_VEXP] = ph.guard.exponent if vg else 0.0
         # No pair may be in reach of two images of each other (nor a particle of its
         # own image): the two largest reaches must sum to less than half the
         # shortest period.  Radii alone must already fit.

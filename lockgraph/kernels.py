@@ -50,7 +50,7 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2
 
 # par: float parameters of the step
 (P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_HALFPER,
- P_RMAX, P_EXTRA, P_VMIN) = range(15)
+ P_RMAX, P_EXTRA, P_VMIN, P_VEXP) = range(16)
 NPAR = 16
 # ipar: integer parameters
 I_LAW, I_DISH, I_CAP, I_PAPER = range(4)
@@ -69,6 +69,19 @@ CTR_BAD = 2  # ctr slot: the slot that caused a COLLAPSE / SIGMA_TOO_LARGE
 
 WALL_KEY_FLOOR = 1 << 62
 WALL_KEY_CYL = (1 << 62) + 1
+
+
+@kernel(inline=True)
+def slow_impact(ipar, par, vn):
+    """Restitution of an impact the collapse guard covers (normal speed vn >= 0):
+    1 (elastic) under the TC model and the hard velocity guard; under the soft
+    velocity guard (exponent p = par[P_VEXP] > 0, only below v_min)
+    1 - (1 - e(vn)) (vn / v_min)^p."""
+    p = par[P_VEXP]
+    if p <= 0.0 or vn >= par[P_VMIN]:  # TC-guarded impacts may be fast: elastic
+        return 1.0
+    e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], vn)
+    return 1.0 - (1.0 - e) * (vn / par[P_VMIN]) ** p
 
 
 @kernel(inline=True)
@@ -289,8 +302,8 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
         now = par[P_T0] + t
         tc = par[P_TC]
         if (tc > 0.0 and (now - tlast[i] < tc or now - tlast[j] < tc)) or -vn < par[P_VMIN]:
-            e = 1.0
-            st[S_GUARDED] += 1  # made elastic by the collapse guard
+            e = slow_impact(ipar, par, -vn)
+            st[S_GUARDED] += 1  # made (more) elastic by the collapse guard
         else:
             e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -vn)
         mi = mass[i]
@@ -365,8 +378,8 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
         g0 = par[P_G]
         w = vel[i, 2] - g0 * t  # real vertical velocity
         if w <= 0.0:
-            e = 1.0 if -w < par[P_VMIN] else coefficient(ipar[I_LAW], par[P_E], par[P_VC],
-                                                        par[P_EXP], -w)
+            e = slow_impact(ipar, par, -w) if -w < par[P_VMIN] else \
+                coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -w)
             w2 = -e * w
             if w2 < par[P_WMIN]:
                 w2 = par[P_WMIN]
@@ -379,8 +392,8 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
         ny = x1 / rho
         vn = vel[i, 0] * nx + vel[i, 1] * ny
         if vn > 0.0:
-            e = 1.0 if vn < par[P_VMIN] else coefficient(ipar[I_LAW], par[P_E], par[P_VC],
-                                                        par[P_EXP], vn)
+            e = slow_impact(ipar, par, vn) if vn < par[P_VMIN] else \
+                coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], vn)
             vel[i, 0] -= (1.0 + e) * vn * nx
             vel[i, 1] -= (1.0 + e) * vn * ny
             st[S_CYLIMP] += mass[i] * (1.0 + e) * vn

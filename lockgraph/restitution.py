@@ -24,6 +24,17 @@
   by the TC model.  The price: motion below ``v_min`` is never damped, so a
   settled bed keeps bouncing (the settling dish at 0.35 s: rms 2-6 mm/s for
   v_min from 3 mm/s to 2 cm/s, against 1 mm/s under the TC model at 1e-4 s).
+* ``VelocityGuard(v_min, exponent=p)``, p > 0, the soft form: below ``v_min``
+  the restitution is 1 - (1 - e(v)) (v / v_min)^p, continuous at v_min and 1
+  only in the limit v -> 0.  Slow motion is still damped: a floor bounce's
+  speed v obeys dv/dn = -(1 - e) v^(p+1) / v_min^p per bounce, and a bounce
+  lasts 2 v / g, so v_n ~ n^(-1/p) and the durations sum to a divergent series
+  for p >= 1 (no Zeno sequence; for p < 1 it converges: refused).  For p = 2
+  the speed falls as 1/t while the bounce count grows as t^2 (for p = 1
+  exponentially).  The
+  settling dish does settle under it (at v_min = 2-3 cm/s, p = 2, close to
+  the reference's settling time), but a settled bed's collision rate keeps
+  rising as its motion dies out.
 """
 from dataclasses import dataclass
 
@@ -82,11 +93,23 @@ class CollapseGuard:
 
 @dataclass(frozen=True)
 class VelocityGuard:
-    """Impacts whose normal approach speed is below ``v_min`` (m/s) are elastic."""
+    """Impacts whose normal approach speed v is below ``v_min`` (m/s) are elastic
+    (``exponent`` 0, the hard guard) or, with ``exponent`` p > 0 (the soft
+    guard), have restitution 1 - (1 - e(v)) (v / v_min)^p: continuous at
+    v_min, elastic only in the limit v -> 0."""
     v_min: float
+    exponent: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "v_min", _positive("collapse_guard.v_min", self.v_min))
+        p = float(self.exponent)
+        if not (p == 0.0 or 1.0 <= p < float("inf")):
+            # below 1 a floor bounce's durations v_n ~ n^(-1/p) sum to a finite
+            # time: the Zeno sequence the guard is there to prevent
+            raise InputError("collapse_guard.exponent",
+                             f"must be 0 (hard guard) or a finite number >= 1 (got "
+                             f"{self.exponent!r}; below 1 bounces would collapse)")
+        object.__setattr__(self, "exponent", p)
 
 
 @kernel

@@ -42,6 +42,8 @@ LAWS = {"constant": {"e"}, "bridges": {"v_c", "exponent"}}
 # physics.collapse_guard: false, true (= "tc"), "tc" or "velocity", and the
 # parameters each needs
 GUARDS = {"tc": {"tc"}, "velocity": {"v_guard"}}
+# and the parameters each may take (default: the hard velocity guard, exponent 0)
+GUARD_OPTIONS = {"tc": set(), "velocity": {"v_guard_exponent"}}
 LATE = {"orbits": {"late_orbits"}, "settle": {"settle_speed", "settle_time_max"},
         "time": {"late_time"}}
 STEP_KEYS = {"dt"}
@@ -93,6 +95,7 @@ class SceneFile:
         guard = guard_kind(self.physics)
         if guard is not None:
             need |= GUARDS[guard]
+            opt |= GUARD_OPTIONS[guard]
         return need, opt
 
 
@@ -244,7 +247,7 @@ def build_physics(scene, p, geometry):
         law = Bridges(p["v_c"], p["exponent"])
     kind = guard_kind(ph)
     guard = (None if kind is None else CollapseGuard(p["tc"]) if kind == "tc"
-             else VelocityGuard(p["v_guard"]))
+             else VelocityGuard(p["v_guard"], p.get("v_guard_exponent", 0.0)))
     return Physics(domain, tuple(forces), law, guard)
 
 

@@ -7,7 +7,7 @@ import pytest
 from lockgraph import kernels as K
 from lockgraph import scenarios
 from lockgraph.engine import Engine
-from lockgraph.errors import InelasticCollapseError
+from lockgraph.errors import InelasticCollapseError, InputError
 from lockgraph.physics import Physics
 from lockgraph.restitution import Bridges, CollapseGuard, Constant, VelocityGuard, coefficient
 from lockgraph.simulation import Simulation
@@ -135,6 +135,58 @@ def test_velocity_guard_makes_slow_impacts_elastic(speed, elastic):
     assert int(eng.totals[K.S_PAIR]) == 1
 
 
+@pytest.mark.parametrize("speed,e", [
+    # below v_min = 0.01: e = 1 - (1 - 0.5) (0.005 / 0.01)^2 = 0.875
+    (0.005, 0.875),
+    # above v_min the law's e
+    (0.011, 0.5)])
+def test_soft_velocity_guard_softens_slow_impacts(speed, e):
+    """Head-on, equal masses, the soft guard (exponent 2): restitution rises
+    from the law's e at v_min to 1 as the impact speed goes to zero."""
+    st = State([[-1.0, 0, 0], [0.5, 0, 0]], [[speed, 0, 0], [0, 0, 0]], np.full(2, 0.5),
+               np.ones(2))
+    eng = Engine(st, cube(e=0.5, guard=VelocityGuard(0.01, exponent=2.0)), 500.0)
+    eng.step()
+    v = eng.state().vel[:, 0]
+    assert v == pytest.approx([0.5 * speed * (1 - e), 0.5 * speed * (1 + e)], rel=1e-12)
+    assert int(eng.totals[K.S_GUARDED]) == (1 if speed < 0.01 else 0)
+
+
+def test_soft_velocity_guard_damps_a_floor_bounce_without_collapse():
+    """A grain dropped on the floor, e = 0.5, soft guard (v_min = 1 cm/s,
+    exponent 2): below v_min each bounce keeps 1 - 0.5 (v / v_min)^2 of its
+    speed, so v falls as ~1/t — the hop is damped (unlike the hard guard's) —
+    while the bounces' durations 2 v / g sum to a divergent series: no Zeno
+    sequence, the bounce count grows as ~t^2.  The engine's bounce count and
+    last hop speed equal this recursion's."""
+    from lockgraph.domains import Dish
+    from lockgraph.forces import Gravity
+
+    v_min, e, g, rad, h0 = 0.01, 0.5, 9.81, 0.001, 0.0012
+    ph = Physics(Dish(0.01), (Gravity(g),), Constant(e), VelocityGuard(v_min, exponent=2.0))
+    sim = Simulation(State([[0.0, 0.0, h0]], [[0, 0, 0]], [rad], [1.0]), ph, dt=0.005,
+                     collapse_limit=5000)
+    steps = 60
+    sim.run(steps)
+    t_end = steps * 0.005
+    # the recursion: impact speeds v_k at times t_k
+    v = np.sqrt(2 * g * (h0 - rad))
+    t = np.sqrt(2 * (h0 - rad) / g)
+    bounces = 0
+    while t < t_end:
+        bounces += 1
+        v *= e if v >= v_min else 1 - (1 - e) * (v / v_min) ** 2
+        t += 2 * v / g
+    assert abs(sim.stats["wall_collisions"] - bounces) <= 1  # the last may straddle t_end
+    s = sim.state
+    energy = 0.5 * s.vel[0, 2] ** 2 + g * (s.pos[0, 2] - rad)  # = v^2 / 2 of the hop
+    assert np.sqrt(2 * energy) == pytest.approx(v, rel=1e-3)
+    # damped ~ as 1/t: 2 v_min^2 / ((1 - e) g t) = 1.4e-4 m/s at t = 0.3 s (the hard
+    # guard leaves a hop of at least e v_min = 5e-3 m/s)
+    assert v < 0.02 * v_min
+    assert bounces > 1000  # ... at a cost: ~ (1 - e) g^2 t^2 / (8 v_min^2) bounces
+
+
 def test_velocity_guard_prevents_collapse_on_the_floor():
     """A grain dropped on the floor with e = 0.5: its bounces lose speed until
     they are slower than v_min, then stay elastic — no Zeno sequence, and it
@@ -165,6 +217,20 @@ def test_scene_declares_the_velocity_guard(tmp_path):
                     .replace("tc = 1.0e-4", "v_guard = 0.01"))
     sc = scenarios.load(str(path), "early", n=50)
     assert sc.physics.guard == VelocityGuard(0.01)
+    # the soft guard: an optional exponent
+    soft = text.replace("collapse_guard = true", 'collapse_guard = "velocity"').replace(
+        "tc = 1.0e-4", "v_guard = 0.01\nv_guard_exponent = 2")
+    path.write_text(soft)
+    assert scenarios.load(str(path), "early", n=50).physics.guard == VelocityGuard(0.01, 2.0)
+    path.write_text(soft.replace("v_guard_exponent = 2", "v_guard_exponent = -2"))
+    with pytest.raises(ScenarioError, match="v_guard_exponent"):
+        scenarios.load(str(path), "early", n=50)
+    path.write_text(text.replace("tc = 1.0e-4", "tc = 1.0e-4\nv_guard_exponent = 2"))
+    with pytest.raises(ScenarioError, match="v_guard_exponent"):  # not the TC model's
+        scenarios.load(str(path), "early", n=50)
+    for bad in (float("nan"), 0.5, -1.0):  # below 1 the floor's bounces would collapse
+        with pytest.raises(InputError, match="collapse_guard.exponent"):
+            VelocityGuard(0.01, bad)
     path.write_text(text.replace("collapse_guard = true", 'collapse_guard = "speed"'))
     with pytest.raises(ScenarioError, match="physics.collapse_guard"):
         scenarios.load(str(path), "early", n=50)
