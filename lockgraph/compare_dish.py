@@ -75,9 +75,10 @@ def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=Non
     every = max(1, int(round(SAMPLE_EVERY / sc.dt)))
     samples = max(1, int(round(duration / (every * sc.dt))))
     st = sim.state
-    times, pos, vel, imp = [st.time], [st.pos], [st.vel], [0.0]
+    times, pos, vel, imp, walls = [st.time], [st.pos], [st.vel], [0.0], [0.0]
     for k in range(samples):
         sim.run(every)
+        walls.append(sim.wall_s)
         if progress is not None:
             progress((k + 1) / samples)
         st = sim.state
@@ -95,7 +96,7 @@ def run_lockgraph(sc, duration, threads=1, lock="graph", scale=4.0, progress=Non
     info = {"wall_s": sim.wall_s, "collisions": stats["collisions"],
             "max_overlap": stats["max_overlap"],
             "max_collisions_per_step": stats["max_collisions_per_step"],
-            "steps": stats["steps"], "dt": sc.dt}
+            "steps": stats["steps"], "dt": sc.dt, "sample_wall": walls}
     return times, np.array(pos), np.array(vel), float(load), info
 
 
@@ -112,7 +113,7 @@ def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
                                        weight)
     info = {"wall_s": res.wall_s, "loop_s": res.loop_s, "steps": res.steps, "dt": res.dt,
             "contact_time": res.contact_time, "version": res.version,
-            "failures": res.failures,
+            "failures": res.failures, "sample_wall": res.sample_wall.tolist(),
             # how far the soft contacts overlap at the end (fraction of a diameter)
             "max_overlap": res.max_overlap}
     return res.times, res.pos, res.vel, load, info

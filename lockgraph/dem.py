@@ -112,7 +112,10 @@ class DemResult:
     dt : step (s); contact_time : t_c (s); steps : steps run; wall_s : wall time
     of the whole subprocess (s); loop_s : the code's own timing of its run loop
     (s); failures : what went wrong (dict, empty when nothing did); deck : the
-    input deck; log : the code's last output lines.
+    input deck; log : the code's last output lines; sample_wall : (k,) s, the
+    wall time from the subprocess's start to each snapshot (its start-up plus
+    the code's own elapsed-time column ``cpu`` of the thermo output; NaN if
+    the output could not be read).
     """
     code: str
     version: str
@@ -128,6 +131,7 @@ class DemResult:
     deck: str = ""
     log: str = ""
     max_overlap: float = math.nan
+    sample_wall: np.ndarray = None
 
 
 def _f(x):
@@ -265,7 +269,7 @@ def _run_lines(lines, dt, steps, every, dump_format, track):
     without stopping (the harness counts them), dump every ``every`` steps —
     all particles, or only ``track`` (then all of them at the start and end)."""
     lines = lines + ["fix integrate all nve/sphere", f"timestep {_f(dt)}",
-                     "thermo_style custom step atoms ke", f"thermo {max(1, every)}",
+                     "thermo_style custom step atoms ke cpu", f"thermo {max(1, every)}",
                      "thermo_modify lost warn norm no"]
     group = "all"
     if track is not None:
@@ -277,6 +281,27 @@ def _run_lines(lines, dt, steps, every, dump_format, track):
               f"dump_modify out sort id format {dump_format}",
               f"run {steps}"]
     return "\n".join(lines) + "\n"
+
+
+def thermo_elapsed(out):
+    """The ``cpu`` column of a run's thermo table (s since the run began: both
+    codes time it with MPI_Wtime), one value per thermo line; other lines
+    (warnings) inside the table are skipped."""
+    vals, col, width = [], None, 0
+    for line in out.splitlines():
+        tok = line.split()
+        if not tok:
+            continue
+        if tok[0] == "Step":
+            col, width = (tok.index("CPU"), len(tok)) if "CPU" in tok else (None, 0)
+        elif tok[0] == "Loop":
+            col = None
+        elif col is not None and len(tok) == width:
+            try:
+                vals.append(float(tok[col]))
+            except ValueError:
+                pass
+    return np.array(vals)
 
 
 def read_dump(path, n):
@@ -393,12 +418,15 @@ def run(state, physics, code, duration, contact=Contact(), samples=1, ranks=1, t
                 if hit.size:
                     pos[hit[0]], vel[hit[0]] = fpos[k], fvel[k]
         loop = sum(float(m.group(1)) for m in _LOOP.finditer(out))
+        elapsed = thermo_elapsed(out)
+        sample_wall = (wall - loop + elapsed if elapsed.shape[0] == dsteps.shape[0]
+                       else np.full(dsteps.shape[0], np.nan))
     finally:
         shutil.rmtree(work, ignore_errors=True)
     if isinstance(physics.domain, PeriodicCube):
         pos = _unwrap(pos, state.pos, physics.domain.length)
     res = DemResult(code, version, state.time + dsteps * step, pos, vel, step, tc, steps,
-                    wall, loop, {}, deck, log)
+                    wall, loop, {}, deck, log, sample_wall=sample_wall)
     res.failures = failures(res, state, physics, complete=track is None)
     return res
 

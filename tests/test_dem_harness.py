@@ -99,6 +99,24 @@ def test_read_dump_orders_by_id_and_marks_missing(tmp_path):
     assert np.isnan(pos[1, 1]).all() and pos[1, 0, 2] == 0.25
 
 
+def test_thermo_elapsed_reads_the_cpu_column_through_warnings():
+    """The wall time at each snapshot comes from the thermo table's ``cpu``
+    column (LAMMPS 2024 layout; LIGGGHTS prints the same header); a warning
+    inside the table is skipped, and a second run's table is read on."""
+    out = """Setting up Verlet run ...
+   Step        Atoms        KinEng          CPU
+         0        2   0.0001             0
+        10        2   0.0002    0.51
+WARNING: Lost atoms: original 2 current 2 (src/thermo.cpp:488)
+        20        2   0.0003    1.25
+Loop time of 1.25 on 1 procs for 20 steps with 2 atoms
+Step Atoms KinEng CPU
+       20        2   0.0003  0
+"""
+    assert dem.thermo_elapsed(out).tolist() == [0.0, 0.51, 1.25, 0.0]
+    assert "cpu" in dem._run_lines([], 1e-6, 20, 10, "", None)
+
+
 def test_failures_of_a_clean_and_a_broken_run():
     st = dish_state()
     pos = np.stack([st.pos, st.pos - [0, 0, 1e-4]])
