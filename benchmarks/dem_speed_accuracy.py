@@ -197,7 +197,7 @@ def main():
     print("time to settle, at matched settling time and kinetic energy:")
     for lg in (r for r in rows if r["family"] in one_thread):
         if lg["settle_wall_s"] != lg["settle_wall_s"]:
-            print(f"{lg['method']}: the bed never settles (rms above "
+            print(f"{lg['method']}: a seed's bed never settles (rms above "
                   f"{DO.SETTLE_RMS * 1e3:g} mm/s at {args.time:g} s): no time to settle")
             continue
         s_eps = max(lg["settle_error"], sfloor)
