@@ -31,10 +31,9 @@
   lasts 2 v / g, so v_n ~ n^(-1/p) and the durations sum to a divergent series
   for p >= 1 (no Zeno sequence; for p < 1 it converges: refused).  For p = 2
   the speed falls as 1/t while the bounce count grows as t^2 (for p = 1
-  exponentially).  The
-  settling dish does settle under it (at v_min = 2-3 cm/s, p = 2, close to
-  the reference's settling time), but a settled bed's collision rate keeps
-  rising as its motion dies out.
+  exponentially).  The settling dish does settle under it (at v_min =
+  2-3 cm/s, p = 2, close to the reference's settling time), but a settled
+  bed's collision rate keeps rising as its motion dies out.
 """
 from dataclasses import dataclass
 
