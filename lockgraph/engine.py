@@ -24,7 +24,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .parallel import (INTERIOR, Workers, classify_ranges, classify_regions,
+from .parallel import (INTERIOR, Workers, cache_aligned, classify_ranges, classify_regions,
                        cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
@@ -501,17 +501,18 @@ class Engine:
         on_one = self.threads == 1 or (self.scheduler is not None and self.scheduler.sequential())
         sequential = on_one
         spent = 0.0  # in the events (first events on), over every attempt
+        detected = np.zeros(K.NSTAT)  # the violations of attempts that were repaired
         while True:
             self._setup(img_pos, img_vel, half)
             began = time.perf_counter()
             self.ctr[K.LCOUNT] = log_start
-            st = np.zeros(K.NSTAT)
+            st = detected.copy()
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
             if sequential:
                 # events on one thread (one thread in all, schedule auto or a
                 # repair): the first events on all threads, then one queue
                 dlo, dhi = self._domains()
-                rows = np.zeros((self.threads, K.NSTAT))
+                rows = cache_aligned((self.threads, K.NSTAT))
                 self._pmap(K.first_events, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d])
                                             for d in range(self.threads)])
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
@@ -520,9 +521,9 @@ class Engine:
                 # each thread: its domain's first events, then the domain's queue
                 dlo, dhi = self._domains()
                 q = tournament_size(int((dhi - dlo).max()))
-                dtour_t = np.full((self.threads, 2 * q), np.inf)
-                dtour_s = np.full((self.threads, 2 * q), -1, np.int32)
-                rows = np.zeros((self.threads, K.NSTAT))
+                dtour_t = cache_aligned((self.threads, 2 * q), np.float64, np.inf)
+                dtour_s = cache_aligned((self.threads, 2 * q), np.int32, -1)
+                rows = cache_aligned((self.threads, K.NSTAT))
                 self._pmap(K.init_range, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
                                            dtour_t[d], dtour_s[d])
                                           for d in range(self.threads)])
@@ -539,6 +540,7 @@ class Engine:
                 raise
             spent += time.perf_counter() - began
             if status == K.OK:
+                st[K.S_JNEXT] = st[K.S_JEND] = 0.0  # journal cursors, not statistics
                 if self.record_events:
                     self.log_steps.append((self.steps_done, log_start))
                 if self.scheduler is not None:  # a repair counts as the threads' cost
@@ -554,6 +556,10 @@ class Engine:
             if status == K.VIOLATION:
                 self.repairs += 1
                 sequential = True
+                # the repair's result is the sequential one, but what was
+                # detected is counted: the statistics say why the step was redone
+                for k in (K.S_VIOL, K.S_REACHOUT):
+                    detected[k] = st[k]
                 continue  # redo the step sequentially: the sequential result
             if status == K.COLLAPSE:
                 raise InelasticCollapseError(
@@ -735,7 +741,7 @@ class Engine:
         # one domain's typical gaps between events (from the last step)
         per_domain = max(self.last_events / self.threads, 1.0)
         window = self.workers.window_events * self.dt / per_domain
-        stt = np.zeros((self.threads, K.NSTAT))
+        stt = cache_aligned((self.threads, K.NSTAT))
         wall0 = self.workers.wall_s
         try:
             while True:

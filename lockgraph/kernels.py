@@ -27,7 +27,9 @@ which is the tree order of the current step):
 * ``locks = (lock_of, loff, ladj)`` — the step's lock regions (empty arrays
   when running sequentially); a widened reach that brings together particles
   of non-adjacent regions is a violation of the lock design.
-* ``st`` (NSTAT,) float64 — statistics of the step (one row per thread).
+* ``st`` (NSTAT,) float64 — statistics of the step (one row per thread); its
+  slots ``S_JNEXT`` / ``S_JEND`` hold the calling thread's journal block (not
+  statistics: the engine clears them).
 
 Counters shared between threads (pool, journal, log) are advanced with atomic
 fetch-add, tree reaches with atomic maxima; everything else a kernel writes
@@ -58,8 +60,12 @@ NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
  S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT,
- S_ECYC, S_XFLUX, S_GUARDED) = range(21)
-NSTAT = 24
+ S_ECYC, S_XFLUX, S_GUARDED, S_JNEXT, S_JEND) = range(23)
+NSTAT = 24  # 192 bytes: three cache lines, so rows of a 64-byte aligned array share none
+# journal entries a thread claims at a time: one shared fetch-add per JBLOCK
+# entries, not one per entry (in a dense bed nearly every event journals a
+# particle, and two threads adding to one counter pass its line to and fro)
+JBLOCK = 64
 # status codes
 (OK, NEED_JOURNAL, POOL_OVERFLOW, COLLAPSE, SIGMA_TOO_LARGE, CHUNK, NEED_LOG, VIOLATION, STALL,
  NEED_TRACE) = range(10)
@@ -157,19 +163,36 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
 
 
 @kernel(inline=True)
-def journal(i, vel, tlast, cis, jour, ctr):
-    """Record i's velocity and last collision time before its first change this step."""
+def journal(i, vel, tlast, cis, jour, ctr, st):
+    """Record i's velocity and last collision time before its first change this
+    step, in the calling thread's block of the journal (``st[S_JNEXT]`` up to
+    ``st[S_JEND]``); a new block is claimed when it is used up, its entries
+    marked unused (slot -1) until written.  The caller has checked the room
+    (``journal_room``)."""
     if cis[i] == 0:
         jslot = jour[0]
         jvel = jour[1]
         jtlast = jour[2]
-        k = fetch_add(ctr, JCOUNT, 1)
+        k = np.int64(st[S_JNEXT])
+        if k >= np.int64(st[S_JEND]):
+            k = fetch_add(ctr, JCOUNT, JBLOCK)
+            for q in range(k, k + JBLOCK):
+                jslot[q] = -1
+            st[S_JEND] = k + JBLOCK
+        st[S_JNEXT] = k + 1
         jslot[k] = i
         jvel[k, 0] = vel[i, 0]
         jvel[k, 1] = vel[i, 1]
         jvel[k, 2] = vel[i, 2]
         if tlast.shape[0] > 0:  # tracked only under a collapse guard
             jtlast[k] = tlast[i]
+
+
+@kernel(inline=True)
+def journal_room(st, ctr, cap, claims):
+    """Room for the two entries of one more event of the calling thread, while
+    up to ``claims`` threads (this one included) may each claim a block?"""
+    return st[S_JEND] - st[S_JNEXT] >= 2 or ctr[JCOUNT] + claims * JBLOCK <= cap
 
 
 @kernel(inline=True)
@@ -281,8 +304,8 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
     noff, nent, xhead, xent, xnext, ctr = nbrs
     evt, evp, evc, tour_t, tour_s, hidden = evq
     par, ipar, img_pos, img_vel, img_all, parb = cfg
-    journal(i, vel, tlast, cis, jour, ctr)
-    journal(j, vel, tlast, cis, jour, ctr)
+    journal(i, vel, tlast, cis, jour, ctr, st)
+    journal(j, vel, tlast, cis, jour, ctr, st)
     xi0, xi1, xi2 = position_at(pos, vel, i, t)
     xj0, xj1, xj2 = position_at(pos, vel, j, t)
     dx = xi0 - xj0 - (img_pos[img, 0] + img_vel[img, 0] * t)
@@ -367,7 +390,7 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
     noff, nent, xhead, xent, xnext, ctr = nbrs
     evt, evp, evc, tour_t, tour_s, hidden = evq
     par, ipar, img_pos, img_vel, img_all, parb = cfg
-    journal(i, vel, tlast, cis, jour, ctr)
+    journal(i, vel, tlast, cis, jour, ctr, st)
     x0, x1, x2 = position_at(pos, vel, i, t)
     # Walls neither follow nor reset the collapse guard's clock: a grain resting
     # on the floor touches it every few tc, and if those touches made its next
@@ -576,7 +599,7 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, trace, max_ev
             return OK
         if logt.shape[0] > 0 and ctr[LCOUNT] >= logt.shape[0]:
             return NEED_LOG
-        if ctr[JCOUNT] + 2 > jslot.shape[0]:
+        if not journal_room(st, ctr, jslot.shape[0], 1):
             return NEED_JOURNAL
         trf, tri = trace
         tracing = trf.shape[0] > 0
@@ -745,9 +768,12 @@ def overlap_report(pos, rad, noff, nent, img_pos, tol, out):
 
 @kernel
 def rollback(pos, vel, tl, ncoll, tlast, anc, cis, jslot, jvel, jtlast, jcount):
-    """Undo the drift phase: positions from the anchors, velocities from the journal."""
+    """Undo the drift phase: positions from the anchors, velocities from the journal
+    (entries with slot -1: claimed, unused)."""
     for k in range(jcount):
         s = jslot[k]
+        if s < 0:
+            continue
         vel[s, 0] = jvel[k, 0]
         vel[s, 1] = jvel[k, 1]
         vel[s, 2] = jvel[k, 2]

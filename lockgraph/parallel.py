@@ -54,8 +54,8 @@ from .errors import InputError
 from .events import update_queue
 from .predict import INF
 from .kernels import (I_PAPER, NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
-                      S_VIOL, S_WAIT, STALL, VIOLATION, process_event)
-from .neighbors import JCOUNT, LCOUNT
+                      S_VIOL, S_WAIT, STALL, VIOLATION, journal_room, process_event)
+from .neighbors import LCOUNT
 
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
@@ -75,6 +75,19 @@ INTERIOR = 4
 # sleeps PARK_US per further pick instead of yielding
 PARK_AFTER = 2000
 PARK_US = 50
+
+
+def cache_aligned(shape, dtype=np.float64, fill=0):
+    """A new array filled with ``fill`` whose data begin on a 64-byte boundary,
+    so that rows written by different threads (each a whole number of cache
+    lines long) share no line; numpy aligns small arrays to 16 bytes only."""
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape)) * dtype.itemsize
+    buf = np.empty(nbytes + 64, np.uint8)
+    off = -buf.ctypes.data % 64
+    out = buf[off:off + nbytes].view(dtype).reshape(shape)
+    out.fill(fill)
+    return out
 
 
 @kernel
@@ -333,11 +346,10 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
         if load(ctrl, ABORT) != 0:
             return OK
         # room in the journal and the log for one more event of every domain
-        if ctr[JCOUNT] + 2 * ndom + 2 > jslot.shape[0] or (
-                logt.shape[0] > 0 and ctr[LCOUNT] + ndom + 1 > logt.shape[0]):
+        jroom = journal_room(st, ctr, jslot.shape[0], ndom)
+        if not jroom or (logt.shape[0] > 0 and ctr[LCOUNT] + ndom + 1 > logt.shape[0]):
             if _all_idle(dctl, ndom):
-                _fail(ctrl, NEED_JOURNAL if ctr[JCOUNT] + 2 * ndom + 2 > jslot.shape[0]
-                      else NEED_LOG)
+                _fail(ctrl, NEED_LOG if jroom else NEED_JOURNAL)
                 return OK
             go = False
         else:
