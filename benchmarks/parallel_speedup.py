@@ -48,6 +48,12 @@ N = 50,000, target >= 1.7x):
   sequential steps before the timing (the grains close their gaps; at
   N = 50,000 the marble reaches the bed's top at about step 100).  The
   paper's "late": the particles at rest at the bottom of the cylinder.
+* ``gas``: elastic spheres in a periodic cube at packing fraction 0.45,
+  N = 32,000 (``--quick``: 4,000), early (the FCC lattice melting): dense and
+  uniform, so the load is balanced, but the band about the two cuts (4
+  region hops of ~3.5 diameters each side) covers the 33-diameter box and
+  every event is a boundary event (``tests/test_parallel.py``: where the
+  domain method breaks down).
 * ``deep_bed``: the ``--paper-scale`` marble test's bed — 8,700 grains
   settled by a DEM code (``--bed-code``, LAMMPS by default: ~7 min on one core
   the first time, then cached), 7.5 mm dish, tc = 3e-5 s — with its 6 mm
@@ -76,7 +82,8 @@ CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish": ("dish", "late", 10000, 2000),
          "ring_late": ("ring", "late", 50000, 20000),
          "dish_marble_dem": ("dish_marble", "late", 50000, 10001),
-         "deep_bed": ("dish_marble", "late", 8701, 8701)}
+         "deep_bed": ("dish_marble", "late", 8701, 8701),
+         "gas": ("gas", "early", 32000, 4000)}
 DEEP_BED_DROP = 0.08  # m
 TARGET = 1.7
 
