@@ -268,7 +268,7 @@ def test_journal_blocks_roll_back_exactly():
     rows = np.zeros((2, K.NSTAT))
     touched = list(range(0, n, 2))[:K.JBLOCK + 10]  # thread 0 needs a second block
     touched += list(range(1, n, 6))  # thread 1 (odd slots): fewer than one block
-    for k, i in enumerate(touched):
+    for i in touched:
         row = rows[0] if i % 2 == 0 else rows[1]
         assert K.journal_room(row, ctr, cap, 2)
         K.journal(i, vel, tlast, cis, jour, ctr, row)
