@@ -12,14 +12,17 @@ for a hash of the sources of every module that uses numba.  Why: numba checks
 a cached function against its own file's time stamp only, so a kernel that
 inlines or calls a kernel of another module kept its old compiled body after
 that module changed — measured: the threaded worker (``parallel.py``) cached
-before the velocity guard was added to ``kernels.py`` ran without it.
+before the velocity guard was added to ``kernels.py`` ran without it.  Saves
+into it are serialized across processes (``_locked``).
 """
+import fcntl
+import functools
 import hashlib
 import os
 from pathlib import Path
 
 from numba import njit
-from numba.core import config
+from numba.core import caching, config
 
 HERE = Path(__file__).resolve().parent
 
@@ -42,6 +45,40 @@ def _cache_root():
 
 
 KERNEL_CACHE = str(_cache_root() / "kernels" / source_key())
+KERNEL_ROOT = os.path.dirname(KERNEL_CACHE)
+
+
+def _locked(save):
+    """numba's ``IndexDataCacheFile.save`` under an exclusive file lock in the
+    cache directory, for lockgraph's kernel caches.
+
+    Why: ``save`` reads the function's index, picks the first free data-file
+    number for a new signature, then writes index and data.  Two processes
+    saving different signatures of one kernel at once (``compile_kernels``'s
+    helper beside the main process, Dask workers, test subprocesses) both pick
+    number 1: the index then names one signature's code for the other, and a
+    call runs code compiled for other argument types (seen in a fresh clone:
+    "can't unbox array from PyObject into native value" from a cached
+    permutation kernel).  Under the lock the read, the pick and both writes
+    are one step."""
+    @functools.wraps(save)
+    def wrapper(self, key, data):
+        path = str(self._cache_path)
+        if not path.startswith(KERNEL_ROOT):
+            return save(self, key, data)
+        os.makedirs(path, exist_ok=True)
+        with open(os.path.join(path, "save.lock"), "a") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+            try:
+                return save(self, key, data)
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+    wrapper.lockgraph_locked = True
+    return wrapper
+
+
+if not getattr(caching.IndexDataCacheFile.save, "lockgraph_locked", False):
+    caching.IndexDataCacheFile.save = _locked(caching.IndexDataCacheFile.save)
 
 
 def _njit(f, opts):
