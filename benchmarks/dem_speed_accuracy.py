@@ -5,7 +5,7 @@ also at a 1 ms step) against LAMMPS
 the same falling block.
 
     python benchmarks/dem_speed_accuracy.py [--n 1000] [--time 0.35] [--seeds 2]
-                                            [--quick] [--out DIR]
+                                            [--quick] [--only TEXT ...] [--out DIR]
 
 (about 35 minutes at the defaults; ``--quick``: no E = 1e9 reference run, the
 stiffest LAMMPS run present is the reference, about 8 minutes)
@@ -19,17 +19,19 @@ reference's largest kinetic energy; and the settling time (rms speed below
 3 mm/s) against the reference's.  Reference: LAMMPS at E = 1e9 Pa with
 dt = t_c/50 — a soft-sphere code converges to hard spheres as its contacts
 stiffen, and the two-body tests show it does so at 0.4 per decade of E.
-Noise floor: the same kinetic-energy difference between the reference's own
-seeds, over sqrt(2) (two independent realizations of a chaotic fall differ
-by this much without any method error).
+Noise floor: how far two methods' means over the k seeds differ without any
+method error (the fall is chaotic): sqrt(2 / k) times the standard deviation
+of the reference's own seeds, the largest over the sampled times (k = 2: the
+two seeds' difference over sqrt(2)).
 
 Wall time: the whole run of each method, summed over seeds, measured in this
-process one after another (DEM codes as subprocesses, their startup
-included); and the wall time to settle: up to the sample from which the bed
+process one after another, seed by seed with every method in turn (DEM codes
+as subprocesses, their startup included); and the wall time to settle: up to the sample from which the bed
 stays settled (lockgraph's clock at that sample; the DEM code's start-up plus
 its own elapsed-time column there), summed over seeds, compared at matched
-settling time and kinetic energy (noise floor of the settling time: the
-reference's two seeds' difference over sqrt(2)).  Writes DIR/dem_speed_accuracy.csv and .png and prints, per
+settling time and kinetic energy (noise floor of the settling time: as the
+kinetic energy's).  ``--only TEXT`` runs the methods whose label contains
+TEXT, and the reference.  Writes DIR/dem_speed_accuracy.csv and .png and prints, per
 method, wall time, errors, and lockgraph's time as a fraction of LAMMPS's at
 matched accuracy (target <= 1/5).
 """
@@ -135,15 +137,27 @@ def main():
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="out")
+    ap.add_argument("--only", action="append", default=None, metavar="TEXT",
+                    help="run only the methods whose label contains TEXT (repeatable; "
+                         "the reference always runs)")
     args = ap.parse_args()
+    if args.seeds < 2:
+        ap.error("--seeds must be at least 2 (the noise floors come from the seeds' spread)")
     os.makedirs(args.out, exist_ok=True)
     compile_kernels()
-    results = {}
-    for label, family, settings in methods(args.quick):
-        runs = []
-        for seed in range(1, args.seeds + 1):
+    chosen = [m for m in methods(args.quick)
+              if not args.only or "reference" in m[0] or any(t in m[0] for t in args.only)]
+    # seed by seed, every method in turn: a machine whose speed drifts over the
+    # run (measured: 10-30 % between runs half an hour apart) then slows every
+    # method alike instead of the ones that happened to run late
+    by_label = {label: [] for label, _, _ in chosen}
+    for seed in range(1, args.seeds + 1):
+        for label, family, settings in chosen:
             say(f"{label}, seed {seed}")
-            runs.append(run_one(settings, args.n, seed, args.time))
+            by_label[label].append(run_one(settings, args.n, seed, args.time))
+    results = {}
+    for label, family, settings in chosen:
+        runs = by_label[label]
         results[label] = {"family": family, "runs": runs,
                           "wall_s": sum(r["wall_s"] for r in runs),
                           "ke": np.mean([r["ke"] for r in runs], axis=0),
@@ -155,13 +169,13 @@ def main():
         [k for k in results if k.startswith("LAMMPS E=1e+08")]
     ref = results[ref_label[0]]
     scale = float(ref["ke"].max())
-    pair = ref["runs"]
-    floor = (float(np.max(np.abs(pair[0]["ke"] - pair[1]["ke"]))) / math.sqrt(2) / scale
-             if len(pair) > 1 else 0.0)
-    # the settling time's noise floor, the same way: two realizations' settling
-    # times differ by this much without any method error
-    sfloor = (abs(pair[0]["settle"] - pair[1]["settle"]) / math.sqrt(2)
-              if len(pair) > 1 else 0.0)
+    # noise floors: how far two methods' means over k seeds differ with no
+    # method error, sqrt(2 / k) times the spread of one realization, estimated
+    # from the reference's seeds (k = 2: their difference over sqrt(2))
+    k = len(ref["runs"])
+    kes = np.array([r["ke"] for r in ref["runs"]])
+    floor = float(np.max(np.std(kes, axis=0, ddof=1))) * math.sqrt(2 / k) / scale
+    sfloor = float(np.std([r["settle"] for r in ref["runs"]], ddof=1)) * math.sqrt(2 / k)
     rows = []
     for label, r in results.items():
         err = float(np.max(np.abs(r["ke"] - ref["ke"]))) / scale

@@ -122,3 +122,70 @@ def update_queue(tour_t, tour_s, evt, ids, hidden, lo, hi, i):
         tour_t[k] = t
         tour_s[k] = s
         k >>= 1
+
+
+@kernel(inline=True)
+def _climb_node(tour_t, tour_s, ids, k):
+    """Recompute node k from its children; False if it is unchanged."""
+    a = 2 * k
+    if key_less(tour_t[a + 1], tour_s[a + 1], tour_t[a], tour_s[a], ids):
+        a += 1
+    t = tour_t[a]
+    s = tour_s[a]
+    if tour_t[k] == t and tour_s[k] == s:
+        return False
+    tour_t[k] = t
+    tour_s[k] = s
+    return True
+
+
+@kernel(inline=True)
+def _set_leaf(tour_t, tour_s, evt, ids, hidden, lo, hi, i, b):
+    """Recompute leaf of bucket b after evt[i] changed; False if nothing above can change."""
+    q = tour_t.shape[0] >> 1
+    t, s = _bucket_min(evt, ids, hidden, lo, hi, b)
+    k = q + b
+    if tour_t[k] == t and tour_s[k] == s and s != i:
+        return False
+    tour_t[k] = t
+    tour_s[k] = s
+    return True
+
+
+@kernel(inline=True)
+def update_queue_pair(tour_t, tour_s, evt, ids, hidden, lo, hi, i, j):
+    """``update_queue`` for i and then j (both changed), sharing their bucket
+    and the climb above the node where their paths meet."""
+    q = tour_t.shape[0] >> 1
+    bi = (i - lo) >> BUCKET_BITS
+    bj = (j - lo) >> BUCKET_BITS
+    if bi == bj:
+        # one scan sees both; a changed winner that is neither i nor j still
+        # needs the climb, as in update_queue
+        t, s = _bucket_min(evt, ids, hidden, lo, hi, bi)
+        k = q + bi
+        if tour_t[k] == t and tour_s[k] == s and s != i and s != j:
+            return
+        tour_t[k] = t
+        tour_s[k] = s
+        k >>= 1
+        while k >= 1 and _climb_node(tour_t, tour_s, ids, k):
+            k >>= 1
+        return
+    ui = _set_leaf(tour_t, tour_s, evt, ids, hidden, lo, hi, i, bi)
+    uj = _set_leaf(tour_t, tour_s, evt, ids, hidden, lo, hi, j, bj)
+    ki = (q + bi) >> 1
+    kj = (q + bj) >> 1
+    # both paths climb level by level (every leaf is at one depth) until they meet
+    while ki != kj and (ui or uj):
+        if ui:
+            ui = _climb_node(tour_t, tour_s, ids, ki)
+        if uj:
+            uj = _climb_node(tour_t, tour_s, ids, kj)
+        ki >>= 1
+        kj >>= 1
+    if not (ui or uj):
+        return
+    k = ki
+    while k >= 1 and _climb_node(tour_t, tour_s, ids, k):
+        k >>= 1

@@ -51,7 +51,7 @@ from ._jit import kernel
 from .atomics import bits_float, cpu_relax, cycles, float_bits, load, sched_yield, sleep_us
 from .atomics import spin_lock, spin_unlock, store, cas
 from .errors import InputError
-from .events import update_queue
+from .events import update_queue, update_queue_pair
 from .predict import INF
 from .kernels import (I_PAPER, NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
                       S_VIOL, S_WAIT, STALL, VIOLATION, journal_room, process_event)
@@ -472,12 +472,13 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             spin_lock(ctrl, G)
         spin_lock(dctl, myl)
         hidden[i] = 0
-        update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
+        e = _domain_of(dlo, jw) if jw >= 0 else -1
+        if e == d:
+            update_queue_pair(tt, tsl, evt, ids, hidden, lo, hi, i, jw)
+        else:
+            update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
         if jw >= 0:
-            e = _domain_of(dlo, jw)
-            if e == d:
-                update_queue(tt, tsl, evt, ids, hidden, lo, hi, jw)
-            else:  # a partner across the cut: its domain's queue, under its lock
+            if e != d:  # a partner across the cut: its domain's queue, under its lock
                 spin_lock(dctl, e * NDCTL + DLOCK)
                 update_queue(dtour_t[e], dtour_s[e], evt, ids, hidden, dlo[e], dhi[e], jw)
                 _publish(dctl, e, dtour_t[e], dtour_s[e])

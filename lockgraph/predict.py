@@ -20,9 +20,24 @@ from ._jit import kernel
 INF = math.inf
 
 
+# the entering root c / (sqrt(b^2 - a c) - b) is at least c / (-2 b); rounding
+# moves the computed root by a few units in the last place, far inside this factor
+CUT_MARGIN = 1.0 + 1e-9
+
+
 @kernel(inline=True)
 def pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end):
     """First contact of i with image ``img`` of j (``contact`` = r_i + r_j)."""
+    return pair_time_by(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end, t_end)
+
+
+@kernel(inline=True)
+def pair_time_by(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end, t_cut):
+    """``pair_time``, except that a contact surely later than ``t_cut``
+    (t_now <= t_cut <= t_end, or inf) may be returned as inf: a caller that
+    keeps only the earliest contact skips the square root of a pair that
+    cannot beat the best so far.  Every time it returns <= t_cut is
+    bitwise ``pair_time``'s."""
     dx = pos[i, 0] - pos[j, 0] - img_pos[img, 0]
     dy = pos[i, 1] - pos[j, 1] - img_pos[img, 1]
     dz = pos[i, 2] - pos[j, 2] - img_pos[img, 2]
@@ -35,6 +50,8 @@ def pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end):
     a = ux * ux + uy * uy + uz * uz
     c = dx * dx + dy * dy + dz * dz - contact * contact
     if c > 0.0:
+        if c > (-2.0 * b) * t_cut * CUT_MARGIN:
+            return INF  # the root is past t_cut: c / (-2 b) > t_cut
         disc = b * b - a * c
         if disc < 0.0:
             return INF  # the paths miss
@@ -47,8 +64,22 @@ def pair_time(pos, vel, i, j, img, img_pos, img_vel, contact, t_now, t_end):
     return INF
 
 
+# a wall test's window is widened by this fraction of the step: its contact
+# time is t0 + tau, rounded at the scale of the step, not of the window
+WALL_SLACK = 1e-12
+# the sign test of a quadratic at the window's end must clear its rounding
+# (a few units in the last place of its largest term)
+SIGN_MARGIN = 1e-9
+
+
 @kernel
 def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
+    """``floor_time_by`` without a cut (t_cut = t_end)."""
+    return floor_time_by(pos, vel, tl, i, radius, g0, t_now, t_end, t_end)
+
+
+@kernel(inline=True)
+def floor_time_by(pos, vel, tl, i, radius, g0, t_now, t_end, t_cut):
     """First contact of i with the floor z = 0 under gravity g0 (m/s^2, downward).
 
     The frame is the free-falling one: real height z = pos_z + vel_z t - g0 t^2 / 2
@@ -56,12 +87,21 @@ def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
     ``h + w tau - g0 tau^2 / 2 = 0`` from the time ``tl[i]`` the particle's
     current path began (so the result does not depend on when it is asked),
     with h the gap there; the root is taken in the form that does not cancel.
+    A contact surely later than ``t_cut`` (t_now <= t_cut <= t_end) may be
+    returned as inf; every time <= t_cut is the one without the cut.
     """
     t0 = tl[i]
     w = vel[i, 2] - g0 * t0
     h = (pos[i, 2] + vel[i, 2] * t0) - 0.5 * g0 * t0 * t0 - radius
     if h < 0.0:
         h = 0.0  # rounding below contact: treat as touching
+    # the gap h + w tau - g0 tau^2 / 2 is concave in tau and h at tau = 0: still
+    # open at the end of the (slightly widened) window, it is open all along it,
+    # and the square root below need not be taken
+    lw = t_cut - t0 + WALL_SLACK * t_end
+    ft = w * lw - 0.5 * g0 * lw * lw
+    if h + ft > SIGN_MARGIN * (h + abs(w) * lw + 0.5 * g0 * lw * lw):
+        return INF
     if g0 == 0.0:
         if w >= 0.0:
             return INF
@@ -82,8 +122,14 @@ def floor_time(pos, vel, tl, i, radius, g0, t_now, t_end):
 
 @kernel
 def cylinder_time(pos, vel, tl, i, radius, rcyl, t_now, t_end):
+    """``cylinder_time_by`` without a cut (t_cut = t_end)."""
+    return cylinder_time_by(pos, vel, tl, i, radius, rcyl, t_now, t_end, t_end)
+
+
+@kernel(inline=True)
+def cylinder_time_by(pos, vel, tl, i, radius, rcyl, t_now, t_end, t_cut):
     """First contact of i with the inside of the vertical cylinder of radius rcyl
-    (solved from ``tl[i]``, as ``floor_time``)."""
+    (solved from ``tl[i]``, and cut at ``t_cut``, as ``floor_time_by``)."""
     t0 = tl[i]
     ux = vel[i, 0]
     uy = vel[i, 1]
@@ -101,6 +147,13 @@ def cylinder_time(pos, vel, tl, i, radius, rcyl, t_now, t_end):
         else:
             return INF
     else:
+        # inside: a tau^2 + 2 b tau + c is convex and c < 0 at tau = 0; still
+        # negative at the end of the (widened) window, it is negative all along it
+        lw = t_cut - t0 + WALL_SLACK * t_end
+        q2 = a * lw * lw
+        q1 = 2.0 * b * lw
+        if q2 + q1 + c < -SIGN_MARGIN * (q2 + abs(q1) - c):
+            return INF
         sq = math.sqrt(b * b - a * c)
         if b > 0.0:
             tau = -c / (b + sq)
