@@ -96,35 +96,6 @@ def build_queue(tour_t, tour_s, evt, ids, hidden, lo, hi):
 
 
 @kernel(inline=True)
-def update_queue(tour_t, tour_s, evt, ids, hidden, lo, hi, i):
-    """Restore the tournament of slots lo..hi-1 after evt[i] (or hidden[i]) changed.
-
-    Recomputes i's bucket, then climbs; stops at the first node whose winner
-    (time and slot) is unchanged — nothing above it can change either.
-    """
-    q = tour_t.shape[0] >> 1
-    b = (i - lo) >> BUCKET_BITS
-    t, s = _bucket_min(evt, ids, hidden, lo, hi, b)
-    k = q + b
-    if tour_t[k] == t and tour_s[k] == s and s != i:
-        return
-    tour_t[k] = t
-    tour_s[k] = s
-    k >>= 1
-    while k >= 1:
-        a = 2 * k
-        if key_less(tour_t[a + 1], tour_s[a + 1], tour_t[a], tour_s[a], ids):
-            a += 1
-        t = tour_t[a]
-        s = tour_s[a]
-        if tour_t[k] == t and tour_s[k] == s:
-            return
-        tour_t[k] = t
-        tour_s[k] = s
-        k >>= 1
-
-
-@kernel(inline=True)
 def _climb_node(tour_t, tour_s, ids, k):
     """Recompute node k from its children; False if it is unchanged."""
     a = 2 * k
@@ -150,6 +121,22 @@ def _set_leaf(tour_t, tour_s, evt, ids, hidden, lo, hi, i, b):
     tour_t[k] = t
     tour_s[k] = s
     return True
+
+
+@kernel(inline=True)
+def update_queue(tour_t, tour_s, evt, ids, hidden, lo, hi, i):
+    """Restore the tournament of slots lo..hi-1 after evt[i] (or hidden[i]) changed.
+
+    Recomputes i's bucket, then climbs; stops at the first node whose winner
+    (time and slot) is unchanged — nothing above it can change either.
+    """
+    q = tour_t.shape[0] >> 1
+    b = (i - lo) >> BUCKET_BITS
+    if not _set_leaf(tour_t, tour_s, evt, ids, hidden, lo, hi, i, b):
+        return
+    k = (q + b) >> 1
+    while k >= 1 and _climb_node(tour_t, tour_s, ids, k):
+        k >>= 1
 
 
 @kernel(inline=True)
