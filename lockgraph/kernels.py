@@ -122,6 +122,7 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
     par, ipar, img_pos, img_vel, img_all, parb = cfg
     t_end = par[P_DT]
     best = INF
+    cut = t_end  # the contact tests' cut: the best so far (every finite time is < t_end)
     bkey = WALL_KEY_CYL + 1
     bp = NONE
     bc = 0
@@ -130,12 +131,12 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
         e = nent[k]
         j = e >> 5
         img = e & 31
-        t = pair_time_by(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end,
-                         best if best < t_end else t_end)
+        t = pair_time_by(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end, cut)
         if t <= best and t < INF:
             key = ids[j] * 32 + img
             if t < best or key < bkey:
                 best = t
+                cut = t
                 bkey = key
                 bp = e
                 bc = ncoll[j]
@@ -144,24 +145,23 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
         e = xent[x]
         j = e >> 5
         img = e & 31
-        t = pair_time_by(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end,
-                         best if best < t_end else t_end)
+        t = pair_time_by(pos, vel, i, j, img, img_pos, img_vel, ri + rad[j], t_now, t_end, cut)
         if t <= best and t < INF:
             key = ids[j] * 32 + img
             if t < best or key < bkey:
                 best = t
+                cut = t
                 bkey = key
                 bp = e
                 bc = ncoll[j]
         x = xnext[x]
     if ipar[I_DISH] != 0:
-        t = floor_time_by(pos, vel, tl, i, ri, par[P_G], t_now, t_end,
-                          best if best < t_end else t_end)
+        t = floor_time_by(pos, vel, tl, i, ri, par[P_G], t_now, t_end, cut)
         if t < best:
             best = t
+            cut = t
             bp = FLOOR
-        t = cylinder_time_by(pos, vel, tl, i, ri, par[P_RCYL], t_now, t_end,
-                             best if best < t_end else t_end)
+        t = cylinder_time_by(pos, vel, tl, i, ri, par[P_RCYL], t_now, t_end, cut)
         if t < best:
             best = t
             bp = CYLINDER
@@ -264,6 +264,7 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
     room = reach[k] - fr * rad[k]
     if room > GROW_ROOM * reach[k] and 2.0 * (d2 + lw * lw * sp2) * GROW_MARGIN <= room * room:
         return OK
+    # not lw * speed: the exact test keeps its rounding (and so its results) bit for bit
     sig = math.sqrt(d2) + (dt - t) * math.sqrt(sp2) * (1.0 + s * dt)
     new = sig + fr * rad[k]
     if new <= reach[k]:

@@ -477,12 +477,11 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             update_queue_pair(tt, tsl, evt, ids, hidden, lo, hi, i, jw)
         else:
             update_queue(tt, tsl, evt, ids, hidden, lo, hi, i)
-        if jw >= 0:
-            if e != d:  # a partner across the cut: its domain's queue, under its lock
-                spin_lock(dctl, e * NDCTL + DLOCK)
-                update_queue(dtour_t[e], dtour_s[e], evt, ids, hidden, dlo[e], dhi[e], jw)
-                _publish(dctl, e, dtour_t[e], dtour_s[e])
-                spin_unlock(dctl, e * NDCTL + DLOCK)
+        if jw >= 0 and e != d:  # a partner across the cut: its domain's queue, under its lock
+            spin_lock(dctl, e * NDCTL + DLOCK)
+            update_queue(dtour_t[e], dtour_s[e], evt, ids, hidden, dlo[e], dhi[e], jw)
+            _publish(dctl, e, dtour_t[e], dtour_s[e])
+            spin_unlock(dctl, e * NDCTL + DLOCK)
         _publish(dctl, d, tt, tsl)
         store(dctl, d * NDCTL + DINFL, 0)
         store(dctl, d * NDCTL + DPROG, load(dctl, d * NDCTL + DPROG) + 1)
