@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 
+from lockgraph import _jit
 from lockgraph.cli import main
 
 REQUIRED = ["scene", "state", "n", "steps", "threads", "lock", "scale", "collisions",
@@ -98,8 +99,14 @@ def test_failed_run_never_overwrites_saved_state(tmp_path, capsys):
 def test_console_script_progress():
     """The installed entry point runs and reports progress on stderr."""
     exe = os.path.join(os.path.dirname(sys.executable), "lockgraph")
+    # the child keeps the suite's private LOCKGRAPH_CACHE for states but finds
+    # the kernels this process compiled (numba's cache setting wins over
+    # LOCKGRAPH_CACHE): without it a clean clone compiled them all again here,
+    # 180 s of the 5-minute budget
+    env = dict(os.environ)
+    env.setdefault("NUMBA_CACHE_DIR", os.path.dirname(_jit.KERNEL_ROOT))
     p = subprocess.run([exe, "run", "gas", "--n", "256", "--steps", "3"], capture_output=True,
-                       text=True, timeout=300)
+                       text=True, timeout=300, env=env)
     assert p.returncode == 0, p.stderr
     assert "step 3/3" in p.stderr
     assert "state_sha256" in p.stdout
