@@ -99,14 +99,8 @@ def test_failed_run_never_overwrites_saved_state(tmp_path, capsys):
 def test_console_script_progress():
     """The installed entry point runs and reports progress on stderr."""
     exe = os.path.join(os.path.dirname(sys.executable), "lockgraph")
-    # the child keeps the suite's private LOCKGRAPH_CACHE for states but finds
-    # the kernels this process compiled (numba's cache setting wins over
-    # LOCKGRAPH_CACHE): without it a clean clone compiled them all again here,
-    # 180 s of the 5-minute budget
-    env = dict(os.environ)
-    env.setdefault("NUMBA_CACHE_DIR", os.path.dirname(_jit.KERNEL_ROOT))
     p = subprocess.run([exe, "run", "gas", "--n", "256", "--steps", "3"], capture_output=True,
-                       text=True, timeout=300, env=env)
+                       text=True, timeout=300, env=_jit.child_env())
     assert p.returncode == 0, p.stderr
     assert "step 3/3" in p.stderr
     assert "state_sha256" in p.stdout

@@ -12,6 +12,7 @@ from html.parser import HTMLParser
 
 import pytest
 
+from lockgraph import _jit
 from lockgraph import report_plan as P
 from lockgraph.paper_tables import LOCKS, key_name
 
@@ -31,7 +32,7 @@ def lockgraph_report(out, *args, timeout=1200):
     """Run the CLI; returns the CompletedProcess."""
     return subprocess.run([sys.executable, "-m", "lockgraph.cli", "report", "--smoke",
                            "--out", str(out), *args], capture_output=True, text=True,
-                          timeout=timeout)
+                          timeout=timeout, env=_jit.child_env())
 
 
 @pytest.fixture(scope="module")
@@ -194,7 +195,8 @@ def test_interrupted_campaign_resumes_to_the_same_numbers(smoke, tmp_path):
     scenes = "ring,dish"
     cmd = [sys.executable, "-m", "lockgraph.cli", "report", "--smoke", "--out", str(out),
            "--scenes", scenes, "--no-pictures"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env=_jit.child_env())
     cache = out / "cache"
     t0 = time.time()
     while time.time() - t0 < 600 and proc.poll() is None:
