@@ -160,14 +160,19 @@ def _on_one(eng):
     return eng.scheduler.count[1] if eng.scheduler is not None else 0
 
 
-def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
+def load_case(name, n, bed_code="lammps", bed_steps=100):
+    """A case's starting point: a scene-like namespace (state, physics, dt)."""
+    scene, state = CASES[name][:2]
     say(f"{name}: loading {scene} {state} N={n}")
     if name == "deep_bed":
-        sc = deep_bed(bed_code, bed_steps)
-    elif name == "dish_marble_dem":
-        sc = dem_late(scene, n, bed_code, bed_steps)
-    else:
-        sc = scenarios.load(scene, state, n=n, progress=say)
+        return deep_bed(bed_code, bed_steps)
+    if name == "dish_marble_dem":
+        return dem_late(scene, n, bed_code, bed_steps)
+    return scenarios.load(scene, state, n=n, progress=say)
+
+
+def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
+    sc = load_case(name, n, bed_code, bed_steps)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
