@@ -5,13 +5,17 @@ also at a 1 ms step) against LAMMPS
 the same falling block.
 
     python benchmarks/dem_speed_accuracy.py [--n 1000] [--time 0.35] [--seeds 2]
-                                            [--quick] [--only TEXT ...] [--out DIR]
+                                            [--dish-radius 0.005] [--quick]
+                                            [--only TEXT ...] [--reference-cache DIR]
+                                            [--out DIR]
 
 (about 35 minutes at the defaults; ``--quick``: no E = 1e9 reference run, the
 stiffest LAMMPS run present is the reference, about 8 minutes)
 
 Scene: the dish block of N grains in a 5 mm dish (an 11-diameter bed at
-N = 1000), run for ``--time`` s: the fall, the impact and the settling.
+N = 1000; ``--dish-radius 0.015 --n 2000``: the dish scene's own dish and
+grains, a bed three grains deep), run for ``--time`` s: the fall, the
+impact and the settling.
 
 Error: the largest difference, over the sampled times (every 10 ms), of the
 seed-averaged kinetic energy from the reference's, divided by the
@@ -31,7 +35,11 @@ stays settled (lockgraph's clock at that sample; the DEM code's start-up plus
 its own elapsed-time column there), summed over seeds, compared at matched
 settling time and kinetic energy (noise floor of the settling time: as the
 kinetic energy's).  ``--only TEXT`` runs the methods whose label contains
-TEXT, and the reference.  Writes DIR/dem_speed_accuracy.csv and .png and prints, per
+TEXT, and the reference.  ``--reference-cache DIR`` keeps each seed's
+reference run in DIR (keyed by N, time, dish radius and seed; written whole)
+and reuses it: the reference is the accuracy yardstick only, its wall time
+enters no ratio, so it may be computed once, or beforehand on the other core
+(``reference_run``).  Writes DIR/dem_speed_accuracy.csv and .png and prints, per
 method, wall time, errors, and lockgraph's time as a fraction of LAMMPS's at
 matched accuracy (target <= 1/5).
 """
@@ -55,6 +63,7 @@ from lockgraph.restitution import CollapseGuard, VelocityGuard  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
 PARAMS = {"cylinder_radius": 0.005}
+REFERENCE = ("LAMMPS E=1e+09 (reference)", "LAMMPS", {"code": "lammps", "E": 1e9, "frac": 50})
 
 
 def say(msg):
@@ -95,8 +104,7 @@ def methods(quick):
     for e_mod in (1e7, 1e8):
         out.append((f"LIGGGHTS E={e_mod:g}", "LIGGGHTS", {"code": "liggghts", "E": e_mod}))
     if not quick:
-        out.append(("LAMMPS E=1e+09 (reference)", "LAMMPS",
-                    {"code": "lammps", "E": 1e9, "frac": 50}))
+        out.append(REFERENCE)
     return out
 
 
@@ -107,8 +115,8 @@ def guard(settings):
     return CollapseGuard(settings["tc"])
 
 
-def run_one(settings, n, seed, duration):
-    sc = scenarios.load("dish", "early", n=n, seed=seed, params=PARAMS)
+def run_one(settings, n, seed, duration, params=PARAMS):
+    sc = scenarios.load("dish", "early", n=n, seed=seed, params=params)
     if "threads" in settings:
         sc.physics = dataclasses.replace(sc.physics, guard=guard(settings))
         sc.dt = settings.get("dt", sc.dt)
@@ -130,6 +138,25 @@ def run_one(settings, n, seed, duration):
             "settle_wall": settle_wall}
 
 
+def reference_run(cache, n, seed, duration, radius):
+    """One seed's reference run, from ``cache`` (a directory) when it holds it,
+    else run and stored there (written whole: an interrupted run leaves none).
+    ``python -c "from benchmarks.dem_speed_accuracy import reference_run;
+    reference_run('out/ref', 2000, 3, 0.6, 0.015)"`` fills it beforehand."""
+    key = f"reference-n{n}-t{duration:g}-r{radius:g}-s{seed}"
+    path = os.path.join(cache, key + ".npz")
+    if os.path.exists(path):
+        with np.load(path) as f:
+            say(f"reference, seed {seed}: from {path}")
+            return {k: (f[k] if f[k].ndim else float(f[k])) for k in f.files}
+    os.makedirs(cache, exist_ok=True)
+    res = run_one(REFERENCE[2], n, seed, duration, {"cylinder_radius": radius})
+    tmp = path + ".tmp.npz"
+    np.savez(tmp, **res)
+    os.replace(tmp, path)
+    return res
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1000)
@@ -137,6 +164,10 @@ def main():
     ap.add_argument("--seeds", type=int, default=2)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="out")
+    ap.add_argument("--dish-radius", type=float, default=PARAMS["cylinder_radius"],
+                    help="cylinder radius, m (0.005; the dish scene's own: 0.015)")
+    ap.add_argument("--reference-cache", metavar="DIR",
+                    help="keep and reuse the reference's runs in DIR")
     ap.add_argument("--only", action="append", default=None, metavar="TEXT",
                     help="run only the methods whose label contains TEXT (repeatable; "
                          "the reference always runs)")
@@ -150,11 +181,16 @@ def main():
     # seed by seed, every method in turn: a machine whose speed drifts over the
     # run (measured: 10-30 % between runs half an hour apart) then slows every
     # method alike instead of the ones that happened to run late
+    params = {"cylinder_radius": args.dish_radius}
     by_label = {label: [] for label, _, _ in chosen}
     for seed in range(1, args.seeds + 1):
         for label, family, settings in chosen:
             say(f"{label}, seed {seed}")
-            by_label[label].append(run_one(settings, args.n, seed, args.time))
+            if label == REFERENCE[0] and args.reference_cache:
+                by_label[label].append(reference_run(args.reference_cache, args.n, seed,
+                                                     args.time, args.dish_radius))
+            else:
+                by_label[label].append(run_one(settings, args.n, seed, args.time, params))
     results = {}
     for label, family, settings in chosen:
         runs = by_label[label]
@@ -186,7 +222,8 @@ def main():
                      "reference": label == ref_label[0]})
     path = os.path.join(args.out, "dem_speed_accuracy.csv")
     write_csv(rows, path)
-    print(f"N = {args.n}, {args.time:g} s of settling, {args.seeds} seeds; reference "
+    print(f"N = {args.n}, dish radius {args.dish_radius * 1e3:g} mm, {args.time:g} s of "
+          f"settling, {args.seeds} seeds; reference "
           f"{ref_label[0]}; noise floors: kinetic energy {floor:.3f}, settling time "
           f"{sfloor:.3f} s")
     print(f"{'method':38s} {'wall s':>8s} {'KE error':>9s} {'settle s':>9s} {'settle err':>10s} "
