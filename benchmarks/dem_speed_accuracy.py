@@ -138,19 +138,19 @@ def run_one(settings, n, seed, duration, params=PARAMS):
             "settle_wall": settle_wall}
 
 
-def reference_run(cache, n, seed, duration, radius):
+def reference_run(cache, n, seed, duration, params):
     """One seed's reference run, from ``cache`` (a directory) when it holds it,
     else run and stored there (written whole: an interrupted run leaves none).
     ``python -c "from benchmarks.dem_speed_accuracy import reference_run;
-    reference_run('out/ref', 2000, 3, 0.6, 0.015)"`` fills it beforehand."""
-    key = f"reference-n{n}-t{duration:g}-r{radius:g}-s{seed}"
+    reference_run('out/ref', 2000, 3, 0.6, {'cylinder_radius': 0.015})"`` fills it beforehand."""
+    key = f"reference-n{n}-t{duration:g}-r{params['cylinder_radius']:g}-s{seed}"
     path = os.path.join(cache, key + ".npz")
     if os.path.exists(path):
         with np.load(path) as f:
             say(f"reference, seed {seed}: from {path}")
             return {k: (f[k] if f[k].ndim else float(f[k])) for k in f.files}
     os.makedirs(cache, exist_ok=True)
-    res = run_one(REFERENCE[2], n, seed, duration, {"cylinder_radius": radius})
+    res = run_one(REFERENCE[2], n, seed, duration, params)
     tmp = path + ".tmp.npz"
     np.savez(tmp, **res)
     os.replace(tmp, path)
@@ -188,7 +188,7 @@ def main():
             say(f"{label}, seed {seed}")
             if label == REFERENCE[0] and args.reference_cache:
                 by_label[label].append(reference_run(args.reference_cache, args.n, seed,
-                                                     args.time, args.dish_radius))
+                                                     args.time, params))
             else:
                 by_label[label].append(run_one(settings, args.n, seed, args.time, params))
     results = {}

@@ -35,7 +35,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.parallel_speedup import CASES, load_case, say  # noqa: E402
+from benchmarks.parallel_speedup import CASES, load_case, parse_cases, say  # noqa: E402
 from lockgraph import kernels as K  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
@@ -71,16 +71,22 @@ def run(engs, steps):
 
     def go(k):
         eng, box = engs[k]
-        e0, b0 = eng.totals[K.S_POPS], box[0]
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            eng.step()
-        out[k] = (time.perf_counter() - t0, box[0] - b0, float(eng.totals[K.S_POPS] - e0))
+        try:
+            e0, b0 = eng.totals[K.S_POPS], box[0]
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                eng.step()
+            out[k] = (time.perf_counter() - t0, box[0] - b0, float(eng.totals[K.S_POPS] - e0))
+        except BaseException as exc:  # raised in the caller, not lost with the thread
+            out[k] = exc
     threads = [threading.Thread(target=go, args=(k,)) for k in range(len(engs))]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
+    for r in out:
+        if isinstance(r, BaseException):
+            raise r
     return out
 
 
@@ -142,13 +148,11 @@ def main():
     ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"))
     ap.add_argument("--bed-steps", type=int, default=100)
     args = ap.parse_args()
-    sizes = dict(item.split("=") for item in args.n)
+    names, sizes = parse_cases(ap, args.cases, args.n)
     compile_kernels()
-    for name in args.cases.split(","):
-        if name not in CASES:
-            raise SystemExit(f"--cases: unknown case {name!r} ({', '.join(CASES)})")
-        n = int(sizes.get(name, CASES[name][2]))
-        ceiling(name, n, args.steps, args.repeats, args.axis, args.bed_code, args.bed_steps)
+    for name in names:
+        ceiling(name, sizes[name], args.steps, args.repeats, args.axis, args.bed_code,
+                args.bed_steps)
 
 
 if __name__ == "__main__":

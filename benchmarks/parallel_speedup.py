@@ -108,6 +108,22 @@ def parse_locks(text):
     return out
 
 
+def parse_cases(ap, cases, n_items, quick=False):
+    """(case names, N per case) from ``--cases`` and ``--n CASE=N`` items;
+    ``ap.error`` on an unknown case or a malformed N (before any compiling)."""
+    sizes = {k: (v[3] if quick else v[2]) for k, v in CASES.items()}
+    for item in n_items:
+        k, _, v = item.partition("=")
+        if k not in CASES or not v.isdigit():
+            ap.error(f"--n takes CASE=N with CASE one of {', '.join(CASES)}; got {item!r}")
+        sizes[k] = int(v)
+    names = [c for c in cases.split(",") if c]
+    for c in names:
+        if c not in CASES:
+            ap.error(f"unknown case {c!r}; one of {', '.join(CASES)}")
+    return names, sizes
+
+
 def deep_bed(code, presteps):
     """A scene-like namespace (state, physics, dt): the paper-scale marble test's
     DEM-settled bed with the marble dropped into it and run ``presteps``
@@ -261,16 +277,7 @@ def main():
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()
     locks = parse_locks(args.locks)
-    sizes = {k: (v[3] if args.quick else v[2]) for k, v in CASES.items()}
-    for item in args.n:
-        k, _, v = item.partition("=")
-        if k not in CASES or not v.isdigit():
-            ap.error(f"--n takes CASE=N with CASE one of {', '.join(CASES)}; got {item!r}")
-        sizes[k] = int(v)
-    names = [c for c in args.cases.split(",") if c]
-    for c in names:
-        if c not in CASES:
-            ap.error(f"unknown case {c!r}; one of {', '.join(CASES)}")
+    names, sizes = parse_cases(ap, args.cases, args.n, args.quick)
     t0 = time.perf_counter()
     say(f"compile (or load from numba's cache): {compile_kernels():.1f} s")
     results = {}
