@@ -39,6 +39,7 @@ from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bou
                    subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
+NO_SLEEP = np.zeros(0)  # _finish's sleep states without sleeping grains (read only)
 POLICIES = ("exact", "paper")
 SCHEDULES = ("parallel", "auto")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
@@ -47,13 +48,16 @@ STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "po
 
 
 @kernel
-def _finish(pos, vel, tl, dt, g, code, wp, omega, drift):
+def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp):
     """Step end for a slice of particles: (with ``drift``) the rest of the way to
-    the step end, real coordinates, wrap, second half kick.  One compiled call,
-    so a worker thread does not go back to Python (and the GIL) between them."""
+    the step end, real coordinates, grains falling asleep (``slp``: their sleep
+    states, or empty), wrap, second half kick.  One compiled call, so a worker
+    thread does not go back to Python (and the GIL) between them."""
     if drift:
         K.drift_all(pos, vel, tl, dt)
     K.leave_frame(pos, vel, tl, dt, g)
+    if slp.shape[0] > 0:
+        K.rest_sleepers(vel, slp)
     wrap(pos, vel, code, wp)
     if omega != 0.0:
         kick_hill(pos, vel, omega, 0.5 * dt)
@@ -211,10 +215,19 @@ class Engine:
         self.mass = take(state.mass)
         self.tl = take(state.t_local)
         self.ncoll = take(state.ncoll)
-        # last-collision times matter only to the TC guard: not kept otherwise
-        self.guarded = isinstance(self.physics.guard, CollapseGuard)
-        self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
-        self.tlast_in = None if self.guarded else state.t_last.copy() if copy else state.t_last
+        # last-collision times matter only to the TC guard: not kept otherwise.
+        # With sleeping grains the kernels' per-particle guard word (``tlast``:
+        # journaled, permuted and rolled back like the TC clock) holds the sleep
+        # state instead (K.AWAKE, K.ASLEEP, K.DROWSY)
+        guard = self.physics.guard
+        self.sleeping = isinstance(guard, VelocityGuard) and guard.v_sleep > 0.0
+        self.guarded = isinstance(guard, CollapseGuard) or self.sleeping
+        if self.sleeping:
+            self.tlast = np.where(state.asleep, float(K.ASLEEP), float(K.AWAKE))
+        else:
+            self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
+        self.tlast_in = (None if isinstance(guard, CollapseGuard)
+                         else state.t_last.copy() if copy else state.t_last)
         self.ids = np.arange(n, dtype=np.int32)
         self.perm = np.arange(n, dtype=np.int32)
         vcap = max(4096, n // 16)  # violators moved per node by a re-sort
@@ -297,6 +310,7 @@ class Engine:
         vg = isinstance(ph.guard, VelocityGuard)
         par[K.P_VMIN] = ph.guard.v_min if vg else -1.0
         par[K.P_VEXP] = ph.guard.exponent if vg else 0.0
+        par[K.P_VSLEEP] = ph.guard.v_sleep if vg else 0.0
         # No pair may be in reach of two images of each other (nor a particle of its
         # own image): the two largest reaches must sum to less than half the
         # shortest period.  Radii alone must already fit.
@@ -343,13 +357,16 @@ class Engine:
         """The current state as a State ordered by particle id (a copy)."""
         order = np.empty(self.n, np.int64)
         order[self.ids] = np.arange(self.n)
-        if self.guarded:
+        asleep = None
+        if self.guarded and not self.sleeping:
             t_last = self.tlast[order]
         else:
-            # without a collapse guard collision times are not tracked: as given
+            # without the TC guard collision times are not tracked: as given
             t_last = self.tlast_in.copy()
+        if self.sleeping:
+            asleep = self.tlast[order] == K.ASLEEP
         return State(self.pos[order], self.vel[order], self.rad[order], self.mass[order],
-                     self.tl[order], self.ncoll[order], t_last, self.time)
+                     self.tl[order], self.ncoll[order], t_last, self.time, asleep=asleep)
 
     # ---- bundles -----------------------------------------------------------
     def _bundles(self, img_pos, img_vel, img_all):
@@ -374,11 +391,17 @@ class Engine:
         if hill is not None:
             self._pmap(kick_hill, [(self.pos[q], self.vel[q], hill.omega, 0.5 * self.dt)
                                    for q in self._slices()])
+        if self.sleeping:
+            # an asleep grain moves up at g dt / 2 in the free-falling frame:
+            # back where it was at the step end, never below it in between
+            K.hold_sleepers(self.vel, self.tlast, 0.5 * ph.g * self.dt)
         try:
             st = self._drift_phase()
         except BaseException:
             if hill is not None:
                 kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
+            if self.sleeping:
+                K.hold_sleepers(self.vel, self.tlast, 0.0)
             raise
         sl = self._slices()
         if check_end:  # the overlaps at the step end, before leaving the frame
@@ -391,7 +414,7 @@ class Engine:
         wp = ph.domain.wrap_params(self.time)
         self._pmap(_finish, [(self.pos[q], self.vel[q], self.tl[q], self.dt, ph.g,
                               ph.domain.code, wp, hill.omega if hill is not None else 0.0,
-                              not check_end)
+                              not check_end, self.tlast[q] if self.sleeping else NO_SLEEP)
                              for q in sl])
         if self.workers is not None:
             self.workers.rest()

@@ -3,8 +3,10 @@
 Argument bundles (tuples of plain arrays; all particle arrays in storage order,
 which is the tree order of the current step):
 
-* ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state (``tlast``
-  is empty unless the physics has a collapse guard; ``ids`` int32); inside
+* ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state (``tlast``,
+  the collapse guard's per-particle word, is empty unless the physics has the
+  TC guard, whose last pair-impact times it holds, or sleeping grains, whose
+  sleep states it holds: AWAKE, ASLEEP, DROWSY; ``ids`` int32); inside
   the drift phase ``pos``/``vel`` are *frame* coordinates (free-falling frame
   when there is gravity): a particle is at ``pos + vel * t`` at step time t
   (``pos`` is its position extrapolated to the step start, reset whenever its
@@ -53,15 +55,19 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2
 
 # par: float parameters of the step
 (P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_HALFPER,
- P_RMAX, P_EXTRA, P_VMIN, P_VEXP) = range(16)
-NPAR = 16
+ P_RMAX, P_EXTRA, P_VMIN, P_VEXP, P_VSLEEP) = range(17)
+NPAR = 17
+# sleep states (in ``tlast`` when P_VSLEEP > 0): awake, asleep (at rest on its
+# support: its velocity is set by the step, not by impacts), and asleep from
+# the step end on (a slow impact on a support came last)
+AWAKE, ASLEEP, DROWSY = 0.0, 1.0, 2.0
 # ipar: integer parameters
 I_LAW, I_DISH, I_CAP, I_PAPER = range(4)
 NIPAR = 4
 # st: statistics
 (S_PAIR, S_WALL, S_STALE, S_GRAZE, S_GROW, S_ADDED, S_MAXOV, S_VIRIAL, S_POPS,
  S_FLOORIMP, S_CYLIMP, S_MAXCIS, S_VIOL, S_BLOCKED, S_WAIT, S_CONC, S_CLAIMS, S_REACHOUT,
- S_ECYC, S_XFLUX, S_GUARDED, S_JNEXT, S_JEND) = range(23)
+ S_ECYC, S_XFLUX, S_GUARDED, S_JNEXT, S_JEND, S_WOKEN) = range(24)
 NSTAT = 24  # 192 bytes: three cache lines, so rows of a 64-byte aligned array share none
 # journal entries a thread claims at a time: one shared fetch-add per JBLOCK
 # entries, not one per entry (in a dense bed nearly every event journals a
@@ -92,6 +98,15 @@ def slow_impact(ipar, par, vn):
     # the scenes' exponent 2 without a call to pow (5 % of a settling bed's time)
     f = r * r if p == 2.0 else r ** p
     return 1.0 - (1.0 - e) * f
+
+
+@kernel(inline=True)
+def rel_speed2(vel, i, j):
+    """Squared speed of i relative to j."""
+    ux = vel[i, 0] - vel[j, 0]
+    uy = vel[i, 1] - vel[j, 1]
+    uz = vel[i, 2] - vel[j, 2]
+    return ux * ux + uy * uy + uz * uz
 
 
 @kernel(inline=True)
@@ -155,7 +170,8 @@ def predict(i, t_now, parts, nbrs, evq, cfg):
                 bp = e
                 bc = ncoll[j]
         x = xnext[x]
-    if ipar[I_DISH] != 0:
+    if ipar[I_DISH] != 0 and not (par[P_VSLEEP] > 0.0 and tlast[i] == ASLEEP):
+        # (an asleep grain rises and comes back to rest: no wall can stop it)
         t = floor_time_by(pos, vel, tl, i, ri, par[P_G], t_now, t_end, cut)
         if t < best:
             best = t
@@ -346,6 +362,15 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
     else:
         now = par[P_T0] + t
         tc = par[P_TC]
+        vsleep = par[P_VSLEEP]
+        fixed_i = False  # an asleep body hit slower than v_sleep: immovable
+        fixed_j = False
+        if vsleep > 0.0:
+            if -vn < vsleep:
+                fixed_i = tlast[i] == ASLEEP
+                fixed_j = tlast[j] == ASLEEP
+            else:
+                st[S_WOKEN] += (tlast[i] == ASLEEP) + (tlast[j] == ASLEEP)
         if (tc > 0.0 and (now - tlast[i] < tc or now - tlast[j] < tc)) or -vn < par[P_VMIN]:
             e = slow_impact(ipar, par, -vn)
             st[S_GUARDED] += 1  # made (more) elastic by the collapse guard
@@ -353,9 +378,18 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
             e = coefficient(ipar[I_LAW], par[P_E], par[P_VC], par[P_EXP], -vn)
         mi = mass[i]
         mj = mass[j]
-        imp = -(1.0 + e) * vn * (mi * mj / (mi + mj))
-        ai = imp / mi
-        aj = imp / mj
+        if fixed_j:
+            imp = -(1.0 + e) * vn * mi
+            ai = imp / mi
+            aj = 0.0
+        elif fixed_i:
+            imp = -(1.0 + e) * vn * mj
+            ai = 0.0
+            aj = imp / mj
+        else:
+            imp = -(1.0 + e) * vn * (mi * mj / (mi + mj))
+            ai = imp / mi
+            aj = imp / mj
         vel[i, 0] += ai * nx
         vel[i, 1] += ai * ny
         vel[i, 2] += ai * nz
@@ -363,14 +397,17 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
         vel[j, 1] -= aj * ny
         vel[j, 2] -= aj * nz
         # new false positions: through the contact point along the new velocities
-        pos[i, 0] = xi0 - vel[i, 0] * t
-        pos[i, 1] = xi1 - vel[i, 1] * t
-        pos[i, 2] = xi2 - vel[i, 2] * t
-        pos[j, 0] = xj0 - vel[j, 0] * t
-        pos[j, 1] = xj1 - vel[j, 1] * t
-        pos[j, 2] = xj2 - vel[j, 2] * t
-        tl[i] = t
-        tl[j] = t
+        # (an immovable sleeper keeps its path to the bit)
+        if not fixed_i:
+            pos[i, 0] = xi0 - vel[i, 0] * t
+            pos[i, 1] = xi1 - vel[i, 1] * t
+            pos[i, 2] = xi2 - vel[i, 2] * t
+            tl[i] = t
+        if not fixed_j:
+            pos[j, 0] = xj0 - vel[j, 0] * t
+            pos[j, 1] = xj1 - vel[j, 1] * t
+            pos[j, 2] = xj2 - vel[j, 2] * t
+            tl[j] = t
         ncoll[i] += 1
         ncoll[j] += 1
         cis[i] += 1
@@ -378,6 +415,17 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
         if tc > 0.0:
             tlast[i] = now
             tlast[j] = now
+        elif vsleep > 0.0:
+            # after a slow impact on a sleeper the mover sleeps from the step
+            # end on if its speed relative to it stays below v_sleep; any other
+            # impact wakes both (or keeps them awake)
+            if fixed_j:
+                tlast[i] = DROWSY if rel_speed2(vel, i, j) < vsleep * vsleep else AWAKE
+            elif fixed_i:
+                tlast[j] = DROWSY if rel_speed2(vel, j, i) < vsleep * vsleep else AWAKE
+            else:
+                tlast[i] = AWAKE
+                tlast[j] = AWAKE
         st[S_PAIR] += 1
         st[S_VIRIAL] += imp * dist
         # y-momentum carried across x by the impulse (collisional stress P_xy)
@@ -431,6 +479,10 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
             vel[i, 2] = w2 + g0 * t
             st[S_FLOORIMP] += mass[i] * (w2 - w)
             hit = True
+            vsleep = par[P_VSLEEP]
+            if vsleep > 0.0:  # the floor is a support: asleep from the step end on if slow
+                u2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + w2 * w2
+                tlast[i] = DROWSY if u2 < vsleep * vsleep else AWAKE
     else:
         rho = math.sqrt(x0 * x0 + x1 * x1)
         nx = x0 / rho
@@ -551,7 +603,10 @@ def _first_events(parts, nbrs, evq, cfg, st, lo, hi):
                     _offer(j, t, (i << 5) | (26 - img), ids[i] * 32 + 26 - img, evt, evp, evc,
                            ids, ncoll)
     if ipar[I_DISH] != 0:
+        sleeping = par[P_VSLEEP] > 0.0
         for i in range(lo, hi):
+            if sleeping and tlast[i] == ASLEEP:
+                continue  # no wall events (as ``predict``)
             t = floor_time(pos, vel, tl, i, rad[i], par[P_G], 0.0, t_end)
             if t < evt[i]:
                 evt[i] = t
@@ -712,6 +767,30 @@ def drift_all(pos, vel, tl, t):
         pos[i, 1] += vel[i, 1] * t
         pos[i, 2] += vel[i, 2] * t
         tl[i] = t
+
+
+@kernel
+def hold_sleepers(vel, slp, w):
+    """At the step start: every asleep grain's velocity (0, 0, w); w = g dt / 2
+    brings it back to its place at the step end under gravity (0 undoes it)."""
+    for i in range(vel.shape[0]):
+        if slp[i] == ASLEEP:
+            vel[i, 0] = 0.0
+            vel[i, 1] = 0.0
+            vel[i, 2] = w
+
+
+@kernel
+def rest_sleepers(vel, slp):
+    """At the step end, in real coordinates: grains whose last impact was a
+    slow one on a support fall asleep, and every asleep grain is at rest."""
+    for i in range(vel.shape[0]):
+        if slp[i] == DROWSY:
+            slp[i] = ASLEEP
+        if slp[i] == ASLEEP:
+            vel[i, 0] = 0.0
+            vel[i, 1] = 0.0
+            vel[i, 2] = 0.0
 
 
 @kernel

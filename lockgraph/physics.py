@@ -47,6 +47,10 @@ class Physics:
                                  f"sheet's omega {self.domain.omega}")
         elif hill is not None:
             raise InputError("physics.forces", "Hill's equations need a ShearingSheet domain")
+        if getattr(self.guard, "v_sleep", 0.0) > 0.0 and (
+                self.gravity is None or not isinstance(self.domain, Dish)):
+            raise InputError("collapse_guard.v_sleep", "sleeping grains rest on a floor "
+                             "under gravity: they need a Dish domain and Gravity")
         if self.gravity is not None and not isinstance(self.domain, Dish):
             raise InputError("physics.forces", "uniform gravity is only modelled with a Dish "
                              "(it needs a floor)")

@@ -34,6 +34,20 @@
   exponentially).  The settling dish does settle under it (at v_min =
   2-3 cm/s, p = 2, close to the reference's settling time), but a settled
   bed's collision rate keeps rising as its motion dies out.
+* ``VelocityGuard(v_min, exponent=p, v_sleep=s)``, s > 0, adds sleeping
+  grains (as rigid-body and granular codes put bodies at rest to sleep): a grain
+  whose speed relative to its support after an impact on the floor or on a
+  sleeping grain is below ``v_sleep`` falls asleep at the end of the step,
+  where it then is: held at rest, feeling no gravity and no walls.  An impact
+  on a sleeping grain with normal approach speed below ``v_sleep`` finds it
+  immovable (the mover bounces off it as off a wall); a faster one wakes it
+  and is an ordinary two-body impact.  A hard-sphere bed carries its weight
+  by collisions, at a rate growing with the weight above a grain; asleep, a
+  grain carries it without any.  The price: momentum is not conserved at an
+  immovable sleeper, a grain asleep on a slope does not slide (it acts as if
+  it had friction), and a sleeper whose support leaves stays where it is
+  until it is hit; a grain falls asleep up to ``v_sleep`` dt from, and up
+  to ``v_sleep^2 / 2 g`` above, where it last touched its support.
 """
 from dataclasses import dataclass
 
@@ -95,9 +109,12 @@ class VelocityGuard:
     """Impacts whose normal approach speed v is below ``v_min`` (m/s) are elastic
     (``exponent`` 0, the hard guard) or, with ``exponent`` p > 0 (the soft
     guard), have restitution 1 - (1 - e(v)) (v / v_min)^p: continuous at
-    v_min, elastic only in the limit v -> 0."""
+    v_min, elastic only in the limit v -> 0.  ``v_sleep`` > 0 (m/s) lets slow
+    grains sleep on their supports (see the module docstring; it needs
+    gravity and a dish)."""
     v_min: float
     exponent: float = 0.0
+    v_sleep: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "v_min", _positive("collapse_guard.v_min", self.v_min))
@@ -109,6 +126,12 @@ class VelocityGuard:
                              f"must be 0 (hard guard) or a finite number >= 1 (got "
                              f"{self.exponent!r}; below 1 bounces would collapse)")
         object.__setattr__(self, "exponent", p)
+        s = float(self.v_sleep)
+        if not (0.0 <= s < float("inf")):
+            raise InputError("collapse_guard.v_sleep",
+                             f"must be a finite number >= 0 (0: no sleeping; got "
+                             f"{self.v_sleep!r})")
+        object.__setattr__(self, "v_sleep", s)
 
 
 @kernel

@@ -219,6 +219,10 @@ class Simulation:
             "wall_collisions": walls,
             # pair impacts the collapse guard made elastic (within tc of a body's last)
             "guarded_impacts": int(t[K.S_GUARDED]),
+            # sleepers woken by an impact faster than v_sleep (sleeping grains only)
+            "woken": int(t[K.S_WOKEN]),
+            "asleep": (int(np.count_nonzero(self._engine.tlast == K.ASLEEP))
+                       if self._engine.sleeping else 0),
             "stale_events": int(t[K.S_STALE]),
             "grazing_events": int(t[K.S_GRAZE]),
             "search_growths": int(t[K.S_GROW]),

@@ -39,6 +39,9 @@ class State:
     t_last : (N,) float64, s — absolute time of each particle's last collision
         (``-inf`` if none); used by the collapse guard.
     time : float, s — absolute simulation time.
+    asleep : (N,) bool — grains asleep (at rest on their support, see
+        ``restitution.VelocityGuard``'s ``v_sleep``); all False unless the
+        physics lets grains sleep.  An asleep grain's velocity is zero.
     """
     pos: np.ndarray
     vel: np.ndarray
@@ -49,6 +52,7 @@ class State:
     t_last: np.ndarray = None
     time: float = 0.0
     meta: dict = field(default_factory=dict)
+    asleep: np.ndarray = None
 
     def __post_init__(self):
         self.pos = _float_array("state.pos", self.pos, (None, 3))
@@ -72,6 +76,18 @@ class State:
             self.t_last = np.ascontiguousarray(self.t_last, dtype=np.float64)
             if self.t_last.shape != (n,) or np.isnan(self.t_last).any():
                 raise InputError("state.t_last", f"must be ({n},) float without NaN")
+        if self.asleep is None:
+            self.asleep = np.zeros(n, bool)
+        else:
+            self.asleep = np.ascontiguousarray(self.asleep, dtype=bool)
+            if self.asleep.shape != (n,):
+                raise InputError("state.asleep", f"must have shape ({n},), got "
+                                 f"{self.asleep.shape}")
+            moving = np.flatnonzero(self.asleep & np.any(self.vel != 0.0, axis=1))
+            if moving.size:
+                raise InputError("state.asleep", f"particle {int(moving[0])} is asleep but "
+                                 f"moving (velocity {self.vel[moving[0]].tolist()}); an "
+                                 f"asleep grain is at rest ({moving.size} such)")
         self.time = float(self.time)
         if not np.isfinite(self.time):
             raise InputError("state.time", f"must be finite (got {self.time!r})")
@@ -91,7 +107,7 @@ class State:
     def copy(self):
         return State(self.pos.copy(), self.vel.copy(), self.radius.copy(), self.mass.copy(),
                      self.t_local.copy(), self.ncoll.copy(), self.t_last.copy(), self.time,
-                     dict(self.meta))
+                     dict(self.meta), self.asleep.copy())
 
     def sha256(self):
         """sha256 of the pos then vel float64 bytes (C order, ordered by id)."""
@@ -114,7 +130,7 @@ class State:
             with os.fdopen(fd, "wb") as fh:
                 np.savez(fh, pos=self.pos, vel=self.vel, radius=self.radius, mass=self.mass,
                          t_local=self.t_local, ncoll=self.ncoll, t_last=self.t_last,
-                         time=np.float64(self.time))
+                         time=np.float64(self.time), asleep=self.asleep)
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
@@ -131,7 +147,8 @@ class State:
                        f["t_local"] if "t_local" in f else None,
                        f["ncoll"] if "ncoll" in f else None,
                        f["t_last"] if "t_last" in f else None,
-                       float(f["time"]) if "time" in f else 0.0)
+                       float(f["time"]) if "time" in f else 0.0,
+                       asleep=f["asleep"] if "asleep" in f else None)
 
     # ---- ASE -------------------------------------------------------------
     def to_ase(self, domain=None):
@@ -139,7 +156,8 @@ class State:
 
         Positions are stored as given (m, not Angstrom).  The exact velocities,
         radii, local times, counters and last-collision times are per-atom
-        arrays ``velocity``, ``radius``, ``t_local``, ``ncoll``, ``t_last``;
+        arrays ``velocity``, ``radius``, ``t_local``, ``ncoll``, ``t_last``,
+        ``asleep``;
         masses are the atoms' masses.  ``atoms.info['time']`` holds the time.
         """
         from ase import Atoms
@@ -154,6 +172,7 @@ class State:
         atoms.new_array("t_local", self.t_local.copy())
         atoms.new_array("ncoll", self.ncoll.copy())
         atoms.new_array("t_last", self.t_last.copy())
+        atoms.new_array("asleep", self.asleep.copy())
         atoms.info["time"] = self.time
         return atoms
 
@@ -164,7 +183,8 @@ class State:
         vel = atoms.arrays["velocity"] if "velocity" in atoms.arrays else atoms.get_velocities()
         get = atoms.arrays.get
         return cls(atoms.get_positions(), vel, atoms.arrays["radius"], atoms.get_masses(),
-                   get("t_local"), get("ncoll"), get("t_last"), atoms.info.get("time", 0.0))
+                   get("t_local"), get("ncoll"), get("t_last"), atoms.info.get("time", 0.0),
+                   asleep=get("asleep"))
 
 
 def _float_array(name, value, shape):
