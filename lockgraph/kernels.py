@@ -366,11 +366,20 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
         fixed_i = False  # an asleep body hit slower than v_sleep: immovable
         fixed_j = False
         if vsleep > 0.0:
+            # hit slowly a sleeper stays put, hit fast it wakes.  An asleep
+            # grain rises and comes back by up to g dt^2 / 8 in a step (its
+            # straight path in the free-falling frame), so a grain on the floor
+            # under it would be squeezed by an immovable body without end: a
+            # sleeper hit from below by a grain that close to the floor wakes
             if -vn < vsleep:
-                fixed_i = tlast[i] == ASLEEP
-                fixed_j = tlast[j] == ASLEEP
-            else:
-                st[S_WOKEN] += (tlast[i] == ASLEEP) + (tlast[j] == ASLEEP)
+                near = 0.25 * par[P_G] * par[P_DT] * par[P_DT]
+                # (n points from j to i)
+                fixed_i = tlast[i] == ASLEEP and not (
+                    nz > 0.0 and xj2 - 0.5 * par[P_G] * t * t - rad[j] < near)
+                fixed_j = tlast[j] == ASLEEP and not (
+                    nz < 0.0 and xi2 - 0.5 * par[P_G] * t * t - rad[i] < near)
+            st[S_WOKEN] += ((tlast[i] == ASLEEP and not fixed_i)
+                            + (tlast[j] == ASLEEP and not fixed_j))
         if (tc > 0.0 and (now - tlast[i] < tc or now - tlast[j] < tc)) or -vn < par[P_VMIN]:
             e = slow_impact(ipar, par, -vn)
             st[S_GUARDED] += 1  # made (more) elastic by the collapse guard

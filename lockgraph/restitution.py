@@ -41,7 +41,9 @@
   where it then is: held at rest, feeling no gravity and no walls.  An impact
   on a sleeping grain with normal approach speed below ``v_sleep`` finds it
   immovable (the mover bounces off it as off a wall); a faster one wakes it
-  and is an ordinary two-body impact.  A hard-sphere bed carries its weight
+  and is an ordinary two-body impact, as is one from below by a grain on
+  the floor (the engine's asleep grain rises and comes back by g dt^2 / 8
+  in a step, and would squeeze it against the floor without end).  A hard-sphere bed carries its weight
   by collisions, at a rate growing with the weight above a grain; asleep, a
   grain carries it without any.  The price: momentum is not conserved at an
   immovable sleeper, a grain asleep on a slope does not slide (it acts as if
