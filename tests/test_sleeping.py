@@ -139,6 +139,30 @@ def test_a_fast_impact_wakes_the_sleeper_and_is_a_two_body_impact():
     eng.close()
 
 
+@pytest.mark.parametrize("height,wakes", [(0.0, True), (4 * R, False)],
+                         ids=["on-the-floor", "in-the-air"])
+def test_a_slow_impact_from_below_wakes_a_sleeper_only_from_the_floor(height, wakes):
+    """A grain moving straight up at 3 mm/s (< v_sleep) into a sleeper just
+    above it.  From the floor the sleeper wakes: held on its straight frame
+    path it comes back down by up to g dt^2 / 8 in a step and, immovable,
+    would squeeze the grain against the floor without end (measured before
+    this rule: an inelastic collapse in a settling dish).  In the air it
+    stays put."""
+    z = R + height
+    st = State([[0.0, 0.0, z + 2 * R + 1e-9], [0.0, 0.0, z]], [[0, 0, 0], [0, 0, 3e-3]],
+               [R, R], [1e-7, 1e-7], asleep=[True, False])
+    eng = Engine(st, dish(V_SLEEP), DT, record_events=True)
+    eng.step()
+    assert int(eng.totals[K.S_WOKEN]) == int(wakes)
+    after = eng.state()
+    if not wakes:
+        assert after.pos[0].tobytes() == st.pos[0].tobytes()
+        assert after.asleep[0]
+    else:
+        assert not after.asleep[0]
+    eng.close()
+
+
 def test_sleeping_needs_gravity_and_a_dish_and_a_valid_speed():
     for bad in (-1e-3, float("nan"), float("inf")):
         with pytest.raises(InputError, match="collapse_guard.v_sleep"):
