@@ -1,6 +1,6 @@
 """Speed against accuracy on the settling dish: lockgraph (1 and 2 threads, four
 collapse-guard times, the hard and the soft velocity guard at three speeds each, the soft one
-also at a 1 ms step) against LAMMPS
+also at a 1 ms step, and sleeping grains at three speeds) against LAMMPS
 (1 rank, 2 MPI ranks) and LIGGGHTS at several contact stiffnesses, all from
 the same falling block.
 

@@ -1,5 +1,5 @@
 """Speed against accuracy for stopping the marble: lockgraph (1 and 2 threads,
-several collapse-guard times, the velocity guard) against LAMMPS (1 rank,
+several collapse-guard times, the velocity guards, sleeping grains) against LAMMPS (1 rank,
 2 MPI ranks) and LIGGGHTS at several stiffnesses, from the same settled bed.
 
     python benchmarks/marble_speed_accuracy.py [--seeds 2] [--height 0.08] [--quick] [--out DIR]
