@@ -112,6 +112,7 @@ def test_kernel_cache_saves_do_not_race_across_processes(tmp_path):
     from numba.core import caching
 
     env = dict(os.environ, LOCKGRAPH_CACHE=str(tmp_path))
+    env.pop("NUMBA_CACHE_DIR", None)  # it would replace the cache root given here
     path = tmp_path / "kernels" / "race"
     procs = [subprocess.Popen([sys.executable, "-c", RACE, str(path), tag], env=env)
              for tag in ("a", "b", "c")]
