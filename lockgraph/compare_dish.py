@@ -119,6 +119,19 @@ def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
     return res.times, res.pos, res.vel, load, info
 
 
+def agreement(per_a, per_b, k, d, extra=None):
+    """``compare.summarize`` of the seeds' observables (name -> list per seed,
+    lockgraph's and the DEM code's), each with its ``allowance`` (ALLOWANCE,
+    plus ``extra`` by name; lengths in grain diameters ``d``) and ``agree``:
+    |difference| <= k uncertainties + the allowance."""
+    obs = summarize(per_a, per_b, k, DO.UNITS)
+    for key, o in obs.items():
+        allow = (ALLOWANCE[key] + (extra or {}).get(key, 0.0)) * (d if key in LENGTHS else 1.0)
+        o["allowance"] = allow
+        o["agree"] = bool(abs(o["lockgraph"] - o["reference"]) <= k * o["uncertainty"] + allow)
+    return obs
+
+
 def compare_dish(scene="dish", against="lammps", n=None, time=0.5, seeds=(1, 2, 3), k=3.0,
                  stiffness=1e7, dt_fraction=20.0, model="hertz", params=None, threads=1,
                  ranks=1, progress=None, cache=None):
@@ -166,12 +179,7 @@ def compare_dish(scene="dish", against="lammps", n=None, time=0.5, seeds=(1, 2, 
             per_b.setdefault(key, []).append(b[key])
         runs.append({"seed": seed, "lockgraph": {**ia, **xa}, "reference": {**ib, **xb},
                      "observables": {"lockgraph": a, "reference": b}})
-    d = 2.0 * float(sc.state.radius.min())
-    obs = summarize(per_a, per_b, k, DO.UNITS)
-    for key, o in obs.items():
-        allow = ALLOWANCE[key] * (d if key in LENGTHS else 1.0)
-        o["allowance"] = allow
-        o["agree"] = bool(abs(o["lockgraph"] - o["reference"]) <= k * o["uncertainty"] + allow)
+    obs = agreement(per_a, per_b, k, 2.0 * float(sc.state.radius.min()))
     la = [r["lockgraph"] for r in runs]
     lb = [r["reference"] for r in runs]
     loads = {"lockgraph": [r["floor_load"] for r in la],

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from lockgraph import dem, scenarios
-from lockgraph.compare_dish import ALLOWANCE, FLOOR_LOAD_TOL, LENGTHS, compare_dish
+from lockgraph.compare_dish import ALLOWANCE, FLOOR_LOAD_TOL, compare_dish
 from lockgraph.errors import InelasticCollapseError
 from lockgraph.physics import Physics
 from lockgraph.simulation import Simulation
@@ -143,9 +143,7 @@ def test_sleeping_bed_against_lammps_within_its_measured_cost(dem_code, reports,
     impact, so the floor's impulse no longer measures it."""
     import dataclasses
 
-    from lockgraph.compare import summarize
-    from lockgraph.compare_dish import measure, run_lockgraph
-    from lockgraph import dish_observables as DO
+    from lockgraph.compare_dish import agreement, measure, run_lockgraph
     from lockgraph.restitution import VelocityGuard
 
     dem_code("lammps")
@@ -165,14 +163,11 @@ def test_sleeping_bed_against_lammps_within_its_measured_cost(dem_code, reports,
             per_b.setdefault(key, []).append(run["observables"]["reference"][key])
     print("fraction of grains at rest at the end, by seed:", asleep)
     assert min(asleep) > 0.5  # the grains did go to sleep
-    d = 2.0 * 5e-4
-    bad = {}
-    for key, o in summarize(per_a, per_b, K, DO.UNITS).items():
-        allow = (ALLOWANCE[key] + SLEEP_EXTRA.get(key, 0.0)) * (d if key in LENGTHS else 1.0)
+    obs = agreement(per_a, per_b, K, 2.0 * 5e-4, extra=SLEEP_EXTRA)
+    for key, o in obs.items():
         print(f"sleeping {key}: lockgraph {o['lockgraph']:.5g}, LAMMPS {o['reference']:.5g}, "
-              f"uncertainty {o['uncertainty']:.2g}, allowance {allow:.2g}")
-        if abs(o["lockgraph"] - o["reference"]) > K * o["uncertainty"] + allow:
-            bad[key] = o
+              f"uncertainty {o['uncertainty']:.2g}, allowance {o['allowance']:.2g}")
+    bad = {key: o for key, o in obs.items() if not o["agree"]}
     assert not bad, bad
 
 
