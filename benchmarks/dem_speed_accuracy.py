@@ -70,8 +70,20 @@ def say(msg):
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
 
 
-# v_sleep (m/s) of the sleeping-grain runs
-SLEEP_SPEEDS = (5e-3, 1e-2, 2e-2)
+# (v_sleep m/s, t_sleep s, step s or None: the scene's) of the sleeping-grain
+# runs.  Measured 2026-12-02 and left out: v_sleep 2 cm/s without the wait,
+# t_sleep = 5 ms (costlier, no closer), 2 cm/s with 2 ms (the bed 0.27 d too
+# tall); steps of 0.3 and 0.5 ms (an asleep grain rises at g dt / 2 in the
+# falling frame, 1.5-2.5 mm/s: fewer grains sleep, and at 0.5 ms the bed
+# never settles)
+SLEEPS = ((5e-3, 0.0, None), (1e-2, 0.0, None), (1e-2, 2e-3, None), (1e-2, 2e-3, 2e-4),
+          (1.5e-2, 2e-3, 2e-4))
+
+
+def sleep_label(v_sleep, t_sleep, dt=None):
+    return (f"lockgraph v_min=0.02 soft, v_sleep={v_sleep:g}"
+            + (f", t_sleep={t_sleep:g}" if t_sleep else "")
+            + (f", dt={dt * 1e3:g}ms" if dt else ""))
 
 
 def methods(quick):
@@ -105,13 +117,20 @@ def methods(quick):
     # its weight by collisions, at a rate growing with its depth; asleep, a
     # grain carries it without any.  At the scene's step: an asleep grain
     # rises and comes back by g dt^2 / 8 a step, at up to g dt / 2 (5 mm/s
-    # at a 1 ms step, where it then wakes its neighbours)
-    out += [(f"lockgraph v_min=0.02 soft, v_sleep={v:g}", "lockgraph sleeping grains",
-             {"threads": 1, "v_guard": 2e-2, "v_exponent": 2.0, "v_sleep": v})
-            for v in SLEEP_SPEEDS]
-    out.append(("lockgraph v_min=0.02 soft, v_sleep=0.01, 2 threads auto",
+    # at a 1 ms step, where it then wakes its neighbours).  Asleep at the end
+    # of the step of its first slow impact on a support, a grain has had no
+    # time to slide into a pocket and the bed ends looser; waiting t_sleep of
+    # slow impacts first (with any partner; faster than v_sleep at a step end
+    # it wakes) it has, and the bed's structure agrees with LAMMPS's
+    # (validation/test_dem_dish.py)
+    out += [(sleep_label(v, t, dt), "lockgraph sleeping grains",
+             {"threads": 1, "v_guard": 2e-2, "v_exponent": 2.0, "v_sleep": v, "t_sleep": t,
+              **({"dt": dt} if dt else {})})
+            for v, t, dt in SLEEPS]
+    out.append((sleep_label(1e-2, 2e-3, 2e-4) + ", 2 threads auto",
                 "lockgraph 2 threads", {"threads": 2, "v_guard": 2e-2, "v_exponent": 2.0,
-                                        "v_sleep": 1e-2, "schedule": "auto"}))
+                                        "v_sleep": 1e-2, "t_sleep": 2e-3, "dt": 2e-4,
+                                        "schedule": "auto"}))
     # 3e7 between: the matched LAMMPS run is measured, not interpolated
     for e_mod in (1e7, 3e7, 1e8):
         out.append((f"LAMMPS E={e_mod:g}", "LAMMPS", {"code": "lammps", "E": e_mod}))
@@ -128,7 +147,7 @@ def guard(settings):
     """lockgraph's collapse guard for a method's settings."""
     if "v_guard" in settings:
         return VelocityGuard(settings["v_guard"], settings.get("v_exponent", 0.0),
-                             settings.get("v_sleep", 0.0))
+                             settings.get("v_sleep", 0.0), settings.get("t_sleep", 0.0))
     return CollapseGuard(settings["tc"])
 
 

@@ -119,14 +119,14 @@ def run_dem(sc, code, duration, contact, ranks=1, threads=1, progress=None):
     return res.times, res.pos, res.vel, load, info
 
 
-def agreement(per_a, per_b, k, d, extra=None):
+def agreement(per_a, per_b, k, d):
     """``compare.summarize`` of the seeds' observables (name -> list per seed,
-    lockgraph's and the DEM code's), each with its ``allowance`` (ALLOWANCE,
-    plus ``extra`` by name; lengths in grain diameters ``d``) and ``agree``:
-    |difference| <= k uncertainties + the allowance."""
+    lockgraph's and the DEM code's), each with its ``allowance`` (ALLOWANCE;
+    lengths in grain diameters ``d``) and ``agree``: |difference| <= k
+    uncertainties + the allowance."""
     obs = summarize(per_a, per_b, k, DO.UNITS)
     for key, o in obs.items():
-        allow = (ALLOWANCE[key] + (extra or {}).get(key, 0.0)) * (d if key in LENGTHS else 1.0)
+        allow = ALLOWANCE[key] * (d if key in LENGTHS else 1.0)
         o["allowance"] = allow
         o["agree"] = bool(abs(o["lockgraph"] - o["reference"]) <= k * o["uncertainty"] + allow)
     return obs

@@ -48,7 +48,7 @@ STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "po
 
 
 @kernel
-def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp):
+def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep, v_sleep):
     """Step end for a slice of particles: (with ``drift``) the rest of the way to
     the step end, real coordinates, grains falling asleep (``slp``: their sleep
     states, or empty), wrap, second half kick.  One compiled call, so a worker
@@ -57,7 +57,7 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp):
         K.drift_all(pos, vel, tl, dt)
     K.leave_frame(pos, vel, tl, dt, g)
     if slp.shape[0] > 0:
-        K.rest_sleepers(vel, slp)
+        K.rest_sleepers(vel, slp, t_end, t_sleep, v_sleep)
     wrap(pos, vel, code, wp)
     if omega != 0.0:
         kick_hill(pos, vel, omega, 0.5 * dt)
@@ -218,12 +218,15 @@ class Engine:
         # last-collision times matter only to the TC guard: not kept otherwise.
         # With sleeping grains the kernels' per-particle guard word (``tlast``:
         # journaled, permuted and rolled back like the TC clock) holds the sleep
-        # state instead (K.AWAKE, K.ASLEEP, K.DROWSY)
+        # state instead (K.AWAKE, K.ASLEEP, or the time a drowsy grain's run of
+        # slow impacts began: State.t_last, when sleeping waits t_sleep)
         guard = self.physics.guard
         self.sleeping = isinstance(guard, VelocityGuard) and guard.v_sleep > 0.0
         self.guarded = isinstance(guard, CollapseGuard) or self.sleeping
         if self.sleeping:
-            self.tlast = np.where(state.asleep, float(K.ASLEEP), float(K.AWAKE))
+            since = (take(state.t_last) if guard.t_sleep > 0.0
+                     else np.full(n, K.AWAKE))
+            self.tlast = np.where(take(state.asleep), K.ASLEEP, since)
         else:
             self.tlast = take(state.t_last) if self.guarded else np.zeros(0)
         self.tlast_in = (None if isinstance(guard, CollapseGuard)
@@ -311,6 +314,7 @@ class Engine:
         par[K.P_VMIN] = ph.guard.v_min if vg else -1.0
         par[K.P_VEXP] = ph.guard.exponent if vg else 0.0
         par[K.P_VSLEEP] = ph.guard.v_sleep if vg else 0.0
+        par[K.P_TSLEEP] = ph.guard.t_sleep if vg else 0.0
         # No pair may be in reach of two images of each other (nor a particle of its
         # own image): the two largest reaches must sum to less than half the
         # shortest period.  Radii alone must already fit.
@@ -358,13 +362,15 @@ class Engine:
         order = np.empty(self.n, np.int64)
         order[self.ids] = np.arange(self.n)
         asleep = None
-        if self.guarded and not self.sleeping:
+        if self.sleeping:
+            word = self.tlast[order]
+            asleep = word == K.ASLEEP
+            t_last = np.where(asleep, -np.inf, word)  # drowsy since; -inf otherwise
+        elif self.guarded:
             t_last = self.tlast[order]
         else:
-            # without the TC guard collision times are not tracked: as given
+            # without a guard's word collision times are not tracked: as given
             t_last = self.tlast_in.copy()
-        if self.sleeping:
-            asleep = self.tlast[order] == K.ASLEEP
         return State(self.pos[order], self.vel[order], self.rad[order], self.mass[order],
                      self.tl[order], self.ncoll[order], t_last, self.time, asleep=asleep)
 
@@ -414,7 +420,8 @@ class Engine:
         wp = ph.domain.wrap_params(self.time)
         self._pmap(_finish, [(self.pos[q], self.vel[q], self.tl[q], self.dt, ph.g,
                               ph.domain.code, wp, hill.omega if hill is not None else 0.0,
-                              not check_end, self.tlast[q] if self.sleeping else NO_SLEEP)
+                              not check_end, self.tlast[q] if self.sleeping else NO_SLEEP,
+                              self.time, self.par[K.P_TSLEEP], self.par[K.P_VSLEEP])
                              for q in sl])
         if self.workers is not None:
             self.workers.rest()

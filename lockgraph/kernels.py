@@ -6,7 +6,7 @@ which is the tree order of the current step):
 * ``parts = (pos, vel, rad, mass, tl, ncoll, tlast, ids)`` — the state (``tlast``,
   the collapse guard's per-particle word, is empty unless the physics has the
   TC guard, whose last pair-impact times it holds, or sleeping grains, whose
-  sleep states it holds: AWAKE, ASLEEP, DROWSY; ``ids`` int32); inside
+  sleep states it holds: AWAKE, ASLEEP or a drowsy grain's time; ``ids`` int32); inside
   the drift phase ``pos``/``vel`` are *frame* coordinates (free-falling frame
   when there is gravity): a particle is at ``pos + vel * t`` at step time t
   (``pos`` is its position extrapolated to the step start, reset whenever its
@@ -55,12 +55,15 @@ from .tree import END, LEFT, RIGHT, SELF_IMAGE, START, pair_reach_ok, point_gap2
 
 # par: float parameters of the step
 (P_DT, P_T0, P_SHEAR, P_FR, P_G, P_RCYL, P_E, P_VC, P_EXP, P_TC, P_WMIN, P_HALFPER,
- P_RMAX, P_EXTRA, P_VMIN, P_VEXP, P_VSLEEP) = range(17)
-NPAR = 17
-# sleep states (in ``tlast`` when P_VSLEEP > 0): awake, asleep (at rest on its
-# support: its velocity is set by the step, not by impacts), and asleep from
-# the step end on (a slow impact on a support came last)
-AWAKE, ASLEEP, DROWSY = 0.0, 1.0, 2.0
+ P_RMAX, P_EXTRA, P_VMIN, P_VEXP, P_VSLEEP, P_TSLEEP) = range(18)
+NPAR = 18
+# sleep states (in ``tlast`` when P_VSLEEP > 0): awake (-inf), asleep (+inf: at
+# rest on its support, its velocity set by the step, not by impacts), and
+# drowsy: a finite word s, the time (the run's clock) from which every impact
+# was a slow one on a support (with P_TSLEEP > 0: on any body); asleep from
+# the first step end at least P_TSLEEP after s (P_TSLEEP = 0: the end of the
+# step of its slow impact)
+AWAKE, ASLEEP = -math.inf, math.inf
 # ipar: integer parameters
 I_LAW, I_DISH, I_CAP, I_PAPER = range(4)
 NIPAR = 4
@@ -425,13 +428,19 @@ def collide_pair(i, j, img, t, parts, step, tree, nbrs, evq, jour, cfg, st, lock
             tlast[i] = now
             tlast[j] = now
         elif vsleep > 0.0:
-            # after a slow impact on a sleeper the mover sleeps from the step
-            # end on if its speed relative to it stays below v_sleep; any other
-            # impact wakes both (or keeps them awake)
+            # after a slow impact on a sleeper the mover is drowsy if its speed
+            # relative to it stays below v_sleep; any other impact wakes both
+            # (or keeps them awake), unless sleeping waits (below)
             if fixed_j:
-                tlast[i] = DROWSY if rel_speed2(vel, i, j) < vsleep * vsleep else AWAKE
+                tlast[i] = drowsy(tlast[i], now, rel_speed2(vel, i, j) < vsleep * vsleep)
             elif fixed_i:
-                tlast[j] = DROWSY if rel_speed2(vel, j, i) < vsleep * vsleep else AWAKE
+                tlast[j] = drowsy(tlast[j], now, rel_speed2(vel, j, i) < vsleep * vsleep)
+            elif par[P_TSLEEP] > 0.0:
+                # with a delay any slow impact keeps both drowsy: the delay and
+                # the speed check at the step end stand in for the support
+                slow = rel_speed2(vel, i, j) < vsleep * vsleep
+                tlast[i] = drowsy(tlast[i], now, slow)
+                tlast[j] = drowsy(tlast[j], now, slow)
             else:
                 tlast[i] = AWAKE
                 tlast[j] = AWAKE
@@ -491,7 +500,7 @@ def collide_wall(i, wall, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks)
             vsleep = par[P_VSLEEP]
             if vsleep > 0.0:  # the floor is a support: asleep from the step end on if slow
                 u2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + w2 * w2
-                tlast[i] = DROWSY if u2 < vsleep * vsleep else AWAKE
+                tlast[i] = drowsy(tlast[i], par[P_T0] + t, u2 < vsleep * vsleep)
     else:
         rho = math.sqrt(x0 * x0 + x1 * x1)
         nx = x0 / rho
@@ -789,13 +798,27 @@ def hold_sleepers(vel, slp, w):
             vel[i, 2] = w
 
 
+@kernel(inline=True)
+def drowsy(word, now, slow):
+    """A grain's sleep word after an impact on a support at time ``now``:
+    drowsy (since its first slow impact in a row) if ``slow``, else awake."""
+    if not slow:
+        return AWAKE
+    return word if AWAKE < word < ASLEEP else now
+
+
 @kernel
-def rest_sleepers(vel, slp):
-    """At the step end, in real coordinates: grains whose last impact was a
-    slow one on a support fall asleep, and every asleep grain is at rest."""
+def rest_sleepers(vel, slp, t_end, t_sleep, v_sleep):
+    """At the step end (time ``t_end``), in real coordinates: grains drowsy for
+    at least ``t_sleep`` fall asleep (with ``t_sleep`` > 0 a drowsy grain as
+    fast as ``v_sleep`` wakes instead), and every asleep grain is at rest."""
     for i in range(vel.shape[0]):
-        if slp[i] == DROWSY:
-            slp[i] = ASLEEP
+        if AWAKE < slp[i] < ASLEEP:
+            u2 = vel[i, 0] * vel[i, 0] + vel[i, 1] * vel[i, 1] + vel[i, 2] * vel[i, 2]
+            if t_sleep > 0.0 and u2 >= v_sleep * v_sleep:
+                slp[i] = AWAKE
+            elif t_end - slp[i] >= t_sleep:
+                slp[i] = ASLEEP
         if slp[i] == ASLEEP:
             vel[i, 0] = 0.0
             vel[i, 1] = 0.0

@@ -170,6 +170,7 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
                      schedule=schedule)
     every = max(1, int(round(SAMPLE_EVERY / dt)))
     times, z, vz = [state.time], [state.pos[-1, 2]], [state.vel[-1, 2]]
+    walls = [0.0]
     t_start = state.time
     last = _time.perf_counter()
     at_rest = False
@@ -179,6 +180,7 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
         times.append(st.time)
         z.append(st.pos[-1, 2])
         vz.append(st.vel[-1, 2])
+        walls.append(sim.wall_s)
         if rest is not None and times[-1] - times[held_since(times, z, rest[0])] >= rest[1]:
             at_rest = True  # the run's only use was the stop: the rest costs collisions
             break
@@ -193,6 +195,7 @@ def drop_lockgraph(state, physics, dt, duration, threads=1, lock="graph", scale=
             "max_overlap": stats["max_overlap"], "threads": stats["threads"],
             "violations": stats["violations"], "repairs": stats["repairs"],
             "stopped_at_rest": at_rest, "simulated_s": final.time - t_start,
+            "sample_wall": walls,
             # every particle's final state: a threaded run must reproduce it bit for bit
             "state_hash": final.sha256()}
     sim.close()
@@ -205,7 +208,9 @@ def drop_dem(state, physics, code, duration, contact, ranks=1, progress=None):
     res = dem.run(state, physics, code, duration, contact, samples=samples, ranks=ranks,
                   track=[state.n - 1], progress=progress)
     info = {"wall_s": res.wall_s, "steps": res.steps, "dt": res.dt, "failures": res.failures,
-            "version": res.version}
+            "version": res.version,
+            "sample_wall": (res.sample_wall.tolist() if res.sample_wall is not None
+                            else [math.nan] * len(res.times))}
     return res.times, res.pos[:, -1, 2], res.vel[:, -1, 2], info
 
 
@@ -228,7 +233,11 @@ def penetration(bed, physics, dt, marble_radius, marble_density, height, duratio
         t, z, vz, info = drop_dem(state, physics, code, duration,
                                   contact or dem.Contact("hertz", 1e7, 20), ranks, progress)
     depth, rest = stop(t, z, surface, marble_radius, grain_d, hold)
+    walls = np.asarray(info["sample_wall"], float)
+    rest_wall = (float(walls[int(np.argmin(np.abs(t - t[0] - rest)))]) if rest == rest
+                 else math.nan)
     return {"code": code, "height": height, "depth": depth, "rest_time": rest,
+            "rest_wall_s": rest_wall,
             "H": height + depth, "impact_speed": math.sqrt(2 * physics.g * height),
             "surface": surface, "wall_s": info["wall_s"], "info": info,
             "trajectory": {"t": t.tolist(), "z": z.tolist()}}
@@ -322,7 +331,9 @@ def compare_marble(scene="dish_marble", against="lammps", n=None, seeds=(1, 2), 
         for code in ("lockgraph", against):
             side = "lockgraph" if code == "lockgraph" else "reference"
             out[side] = {"depth": float(np.mean([r[code]["depth"] for r in rows])),
-                         "rest_time": float(np.mean([r[code]["rest_time"] for r in rows]))}
+                         "rest_time": float(np.mean([r[code]["rest_time"] for r in rows])),
+                         "wall_s": float(np.mean([r[code]["wall_s"] for r in rows])),
+                         "rest_wall_s": float(np.mean([r[code]["rest_wall_s"] for r in rows]))}
         dd = abs(out["lockgraph"]["depth"] - out["reference"]["depth"])
         dt_rest = abs(out["lockgraph"]["rest_time"] - out["reference"]["rest_time"])
         out["depth_agree"] = bool(dd <= depth_tol * d)

@@ -50,6 +50,18 @@
   it had friction), and a sleeper whose support leaves stays where it is
   until it is hit; a grain falls asleep up to ``v_sleep`` dt from, and up
   to ``v_sleep^2 / 2 g`` above, where it last touched its support.
+* ``VelocityGuard(v_min, exponent=p, v_sleep=s, t_sleep=w)``, w > 0: a grain
+  sleeps only after waiting: it is drowsy from its first impact after which
+  its speed relative to the other body (the floor, a sleeper, or now any
+  grain) is below ``v_sleep``, stays drowsy while every impact is that slow,
+  wakes at a faster one or if it is as fast as ``v_sleep`` at a step end,
+  and falls asleep at the first step end at least ``t_sleep`` after it
+  became drowsy.  Put to sleep on its first slow landing, a grain has had no
+  time to slide into a pocket, and the settled bed is looser than a DEM
+  code's (1,000 grains: 0.23 d taller, floor coverage 0.037 lower, against
+  LAMMPS); after 2 ms of slow impacts it agrees with LAMMPS within the
+  scene's tolerances, at about twice the collisions.  The drowsy grains'
+  times are the state's ``t_last``, so a saved run resumes bitwise.
 """
 from dataclasses import dataclass
 
@@ -112,11 +124,12 @@ class VelocityGuard:
     (``exponent`` 0, the hard guard) or, with ``exponent`` p > 0 (the soft
     guard), have restitution 1 - (1 - e(v)) (v / v_min)^p: continuous at
     v_min, elastic only in the limit v -> 0.  ``v_sleep`` > 0 (m/s) lets slow
-    grains sleep on their supports (see the module docstring; it needs
-    gravity and a dish)."""
+    grains sleep on their supports, after ``t_sleep`` (s) of slow impacts if
+    that is > 0 (see the module docstring; it needs gravity and a dish)."""
     v_min: float
     exponent: float = 0.0
     v_sleep: float = 0.0
+    t_sleep: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "v_min", _positive("collapse_guard.v_min", self.v_min))
@@ -134,6 +147,15 @@ class VelocityGuard:
                              f"must be a finite number >= 0 (0: no sleeping; got "
                              f"{self.v_sleep!r})")
         object.__setattr__(self, "v_sleep", s)
+        d = float(self.t_sleep)
+        if not (0.0 <= d < float("inf")):
+            raise InputError("collapse_guard.t_sleep",
+                             f"must be a finite number >= 0 (got {self.t_sleep!r})")
+        if d > 0.0 and s == 0.0:
+            raise InputError("collapse_guard.t_sleep",
+                             "is how long a grain waits before it sleeps: it needs "
+                             "v_sleep > 0")
+        object.__setattr__(self, "t_sleep", d)
 
 
 @kernel

@@ -43,7 +43,7 @@ LAWS = {"constant": {"e"}, "bridges": {"v_c", "exponent"}}
 # parameters each needs
 GUARDS = {"tc": {"tc"}, "velocity": {"v_guard"}}
 # and the parameters each may take (default: the hard velocity guard, exponent 0)
-GUARD_OPTIONS = {"tc": set(), "velocity": {"v_guard_exponent", "v_sleep"}}
+GUARD_OPTIONS = {"tc": set(), "velocity": {"v_guard_exponent", "v_sleep", "t_sleep"}}
 LATE = {"orbits": {"late_orbits"}, "settle": {"settle_speed", "settle_time_max"},
         "time": {"late_time"}}
 STEP_KEYS = {"dt"}
@@ -248,7 +248,7 @@ def build_physics(scene, p, geometry):
     kind = guard_kind(ph)
     guard = (None if kind is None else CollapseGuard(p["tc"]) if kind == "tc"
              else VelocityGuard(p["v_guard"], p.get("v_guard_exponent", 0.0),
-                           p.get("v_sleep", 0.0)))
+                           p.get("v_sleep", 0.0), p.get("t_sleep", 0.0)))
     return Physics(domain, tuple(forces), law, guard)
 
 

@@ -37,7 +37,10 @@ class State:
         ``pos`` is valid; zero between steps.
     ncoll : (N,) int64 — collisions each particle has had (pairs and walls).
     t_last : (N,) float64, s — absolute time of each particle's last collision
-        (``-inf`` if none); used by the collapse guard.
+        (``-inf`` if none); used by the collapse guard.  With sleeping grains
+        that wait (``VelocityGuard``'s ``t_sleep`` > 0) instead: the time from
+        which each drowsy grain has had only slow impacts (``-inf``: awake or
+        asleep).
     time : float, s — absolute simulation time.
     asleep : (N,) bool — grains asleep (at rest on their support, see
         ``restitution.VelocityGuard``'s ``v_sleep``); all False unless the

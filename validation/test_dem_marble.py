@@ -50,6 +50,8 @@ def test_marble_stops_like_in_dem(dem_code, code, marble_reports):
         for side in ("lockgraph", "reference"):
             assert math.isfinite(o[side]["rest_time"]), (side, o)
             assert o[side]["depth"] > 0
+            # the wall time until the sample the marble rests from
+            assert 0 < o[side]["rest_wall_s"] <= o[side]["wall_s"], (side, o)
         assert o["depth_agree"] and o["rest_agree"], o
     # a harder drop goes deeper, in both codes
     a, b = res["per_height"]
