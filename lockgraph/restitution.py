@@ -60,7 +60,8 @@
   time to slide into a pocket, and the settled bed is looser than a DEM
   code's (1,000 grains: 0.23 d taller, floor coverage 0.037 lower, against
   LAMMPS); after 2 ms of slow impacts it agrees with LAMMPS within the
-  scene's tolerances, at about twice the collisions.  The drowsy grains'
+  scene's tolerances, at 1.6-1.9 times the wall time (4-6 times the
+  collisions).  The drowsy grains'
   times are the state's ``t_last``, so a saved run resumes bitwise.
 """
 from dataclasses import dataclass
