@@ -143,6 +143,11 @@ def methods(quick):
     return out
 
 
+# the 1-thread lockgraph families, each set against LAMMPS at matched accuracy
+ONE_THREAD = ("lockgraph", "lockgraph velocity guard", "lockgraph soft velocity guard",
+              "lockgraph sleeping grains")
+
+
 def guard(settings):
     """lockgraph's collapse guard for a method's settings."""
     if "v_guard" in settings:
@@ -271,9 +276,7 @@ def main():
     # matched accuracy: for each 1-thread lockgraph run, the cheapest LAMMPS run
     # (1 rank, reference aside) at least as accurate (errors under the noise
     # floor count as equal to it)
-    one_thread = ("lockgraph", "lockgraph velocity guard", "lockgraph soft velocity guard",
-                  "lockgraph sleeping grains")
-    for lg in (r for r in rows if r["family"] in one_thread):
+    for lg in (r for r in rows if r["family"] in ONE_THREAD):
         eps = max(lg["ke_error"], floor)
         match = [r for r in la if r["ke_error"] <= eps]
         worse = lg["ke_error"] > 2 * max(r["ke_error"] for r in la)
@@ -291,7 +294,7 @@ def main():
     # settled, against the cheapest LAMMPS run whose settling time and kinetic
     # energy are both at least as accurate (under the noise floors: equal)
     print("time to settle, at matched settling time and kinetic energy:")
-    for lg in (r for r in rows if r["family"] in one_thread):
+    for lg in (r for r in rows if r["family"] in ONE_THREAD):
         if lg["settle_wall_s"] != lg["settle_wall_s"]:
             print(f"{lg['method']}: a seed's bed never settles (rms above "
                   f"{DO.SETTLE_RMS * 1e3:g} mm/s at {args.time:g} s): no time to settle")

@@ -43,7 +43,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from benchmarks.common import chart, write_csv  # noqa: E402
-from benchmarks.dem_speed_accuracy import REFERENCE, guard, methods, say  # noqa: E402
+from benchmarks.dem_speed_accuracy import ONE_THREAD, REFERENCE, guard, methods, say  # noqa: E402
 from lockgraph import dem  # noqa: E402
 from lockgraph import marble_drop as M  # noqa: E402
 from lockgraph.physics import Physics  # noqa: E402
@@ -123,11 +123,6 @@ def matched(rows, floors, wall_key):
         print(f"{head} vs {best['method']} ({best['depth_error_d']:.3f} d, "
               f"{best['rest_error_s']:.3f} s, {best[wall_key]:.1f} s): ratio "
               f"{lg[wall_key] / best[wall_key]:.2f} (target <= 0.2)")
-
-
-# the 1-thread lockgraph families, each set against LAMMPS at matched accuracy
-ONE_THREAD = ("lockgraph", "lockgraph velocity guard", "lockgraph soft velocity guard",
-              "lockgraph sleeping grains")
 
 
 def main():
