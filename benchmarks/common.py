@@ -1,6 +1,9 @@
 """Helpers shared by the benchmark scripts."""
 import csv
+import math
 import os
+
+import numpy as np
 
 
 def write_csv(rows, path):
@@ -10,6 +13,31 @@ def write_csv(rows, path):
         w.writeheader()
         w.writerows(rows)
     os.replace(path + ".tmp", path)
+
+
+def cached_npz(path, make):
+    """``make()``'s dict of arrays and numbers, from the .npz file ``path`` if
+    it exists, else made and written there whole (an interrupted run leaves
+    none).  Returns (dict, whether it came from the file)."""
+    if os.path.exists(path):
+        with np.load(path) as f:
+            return {k: (f[k] if f[k].ndim else float(f[k])) for k in f.files}, True
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    res = make()
+    tmp = path + ".tmp.npz"
+    np.savez(tmp, **res)
+    os.replace(tmp, path)
+    return res, False
+
+
+def noise_floor(values):
+    """How far two methods' means over k seeds differ with no method error
+    (the runs are chaotic): sqrt(2 / k) times the standard deviation of one
+    run's value, estimated from the reference's k seeds (``values``, one per
+    seed; a leading axis of arrays: the largest over the rest)."""
+    values = np.asarray(values, float)
+    k = values.shape[0]
+    return float(np.max(np.std(values, axis=0, ddof=1))) * math.sqrt(2 / k)
 
 
 def chart(rows, err_key, xlabel, title, png, floor=None, smallest=1e-4, wall_key="wall_s",

@@ -55,7 +55,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.common import chart, write_csv  # noqa: E402
+from benchmarks.common import cached_npz, chart, noise_floor, write_csv  # noqa: E402
 from lockgraph import dem, scenarios  # noqa: E402
 from lockgraph import dish_observables as DO  # noqa: E402
 from lockgraph.compare_dish import run_dem, run_lockgraph  # noqa: E402
@@ -186,15 +186,9 @@ def reference_run(cache, n, seed, duration, params):
     reference_run('out/ref', 2000, 3, 0.6, {'cylinder_radius': 0.015})"`` fills it beforehand."""
     key = f"reference-n{n}-t{duration:g}-r{params['cylinder_radius']:g}-s{seed}"
     path = os.path.join(cache, key + ".npz")
-    if os.path.exists(path):
-        with np.load(path) as f:
-            say(f"reference, seed {seed}: from {path}")
-            return {k: (f[k] if f[k].ndim else float(f[k])) for k in f.files}
-    os.makedirs(cache, exist_ok=True)
-    res = run_one(REFERENCE[2], n, seed, duration, params)
-    tmp = path + ".tmp.npz"
-    np.savez(tmp, **res)
-    os.replace(tmp, path)
+    res, kept = cached_npz(path, lambda: run_one(REFERENCE[2], n, seed, duration, params))
+    if kept:
+        say(f"reference, seed {seed}: from {path}")
     return res
 
 
@@ -246,13 +240,9 @@ def main():
         [k for k in results if k.startswith("LAMMPS E=1e+08")]
     ref = results[ref_label[0]]
     scale = float(ref["ke"].max())
-    # noise floors: how far two methods' means over k seeds differ with no
-    # method error, sqrt(2 / k) times the spread of one realization, estimated
-    # from the reference's seeds (k = 2: their difference over sqrt(2))
-    k = len(ref["runs"])
-    kes = np.array([r["ke"] for r in ref["runs"]])
-    floor = float(np.max(np.std(kes, axis=0, ddof=1))) * math.sqrt(2 / k) / scale
-    sfloor = float(np.std([r["settle"] for r in ref["runs"]], ddof=1)) * math.sqrt(2 / k)
+    # noise floors, from the reference's seeds (k = 2: their difference over sqrt(2))
+    floor = noise_floor([r["ke"] for r in ref["runs"]]) / scale
+    sfloor = noise_floor([r["settle"] for r in ref["runs"]])
     rows = []
     for label, r in results.items():
         err = float(np.max(np.abs(r["ke"] - ref["ke"]))) / scale

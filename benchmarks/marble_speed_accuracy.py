@@ -32,8 +32,6 @@ drop in DIR and reuses it (its wall time enters no ratio).  Writes
 DIR/marble_speed_accuracy.csv and .png.
 """
 import argparse
-import json
-import math
 import os
 import sys
 
@@ -42,7 +40,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.common import chart, write_csv  # noqa: E402
+from benchmarks.common import cached_npz, chart, noise_floor, write_csv  # noqa: E402
 from benchmarks.dem_speed_accuracy import ONE_THREAD, REFERENCE, guard, methods, say  # noqa: E402
 from lockgraph import dem  # noqa: E402
 from lockgraph import marble_drop as M  # noqa: E402
@@ -73,27 +71,15 @@ KEPT = ("depth", "rest_time", "wall_s", "rest_wall_s")
 
 def reference_drop(cache, bed, sc, seed, height):
     """One bed's reference drop, from ``cache`` (a directory) when it holds it,
-    else run and stored there (written whole: an interrupted run leaves none)."""
+    else run and stored there."""
     key = (f"marble-reference-n{N}-r{PARAMS['cylinder_radius']:g}-s{seed}-h{height:g}"
            f"-m{MARBLE[0]:g}-{MARBLE[1]:g}-t{DURATION:g}")
-    path = os.path.join(cache, key + ".json")
-    if os.path.exists(path):
-        with open(path) as fh:
-            say(f"reference, bed {seed}: from {path}")
-            return json.load(fh)
-    os.makedirs(cache, exist_ok=True)
-    res = {k: drop(bed, sc, REFERENCE[2], height)[k] for k in KEPT}
-    with open(path + ".tmp", "w") as fh:
-        json.dump(res, fh)
-    os.replace(path + ".tmp", path)
+    path = os.path.join(cache, key + ".npz")
+    res, kept = cached_npz(path, lambda: {k: drop(bed, sc, REFERENCE[2], height)[k]
+                                          for k in KEPT})
+    if kept:
+        say(f"reference, bed {seed}: from {path}")
     return res
-
-
-def noise_floor(values):
-    """How far two methods' means over k beds differ with no method error:
-    sqrt(2 / k) times the spread of one bed's value, from the reference's beds."""
-    k = len(values)
-    return float(np.std(values, ddof=1)) * math.sqrt(2 / k)
 
 
 def matched(rows, floors, wall_key):

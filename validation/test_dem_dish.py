@@ -117,20 +117,17 @@ class TestSettledBed:
         assert np.all(diff <= K * se + LAYERING_ALLOWANCE), float(np.max(diff - K * se))
 
 
-# sleeping grains: the soft velocity guard at v_min = 2 cm/s with grains
-# asleep below v_sleep = 1 cm/s (the benchmark's cheapest accurate setting)
+# Sleeping grains: the soft velocity guard at v_min = 2 cm/s, grains asleep
+# after t_sleep = 2 ms of impacts slower than v_sleep = 1 cm/s (the speed
+# benchmark's setting).  Measured 2026-12-02, 3 seeds against LAMMPS
+# E = 1e7: every observable within the scene's own tolerances (at the
+# scene's 0.1 ms step the bed 0.12 d taller, packing fraction 0.010 and
+# floor coverage 0.023 lower; at 0.2 ms 0.11 d, 0.006 and 0.013).  Without
+# the wait (asleep at the end of the step of the first slow impact on a
+# support) the bed was 0.23 d taller and its floor coverage 0.037 lower,
+# beyond them: an asleep grain does not slide, and one put to sleep on its
+# first slow landing has had no time to slide into a pocket.
 SLEEP_GUARD = dict(v_min=0.02, exponent=2.0, v_sleep=0.01, t_sleep=0.002)
-
-
-# Sleeping grains that wait t_sleep = 2 ms of slow impacts first: measured
-# 2026-12-02, 3 seeds against LAMMPS E = 1e7, every observable within the
-# scene's own tolerances (at the scene's 0.1 ms step the bed 0.12 d taller,
-# packing fraction 0.010 and floor coverage 0.023 lower; at the 0.2 ms step
-# the speed benchmark uses 0.11 d, 0.006 and 0.013).  Without the wait (grains asleep at the end
-# of the step of their first slow impact on a support) the bed was 0.23 d
-# taller and its floor coverage 0.037 lower, beyond them: an asleep grain
-# does not slide, and a grain put to sleep on its first slow landing has
-# had no time to slide into a pocket.
 
 
 @pytest.mark.parametrize("dt", [1e-4, 2e-4])
