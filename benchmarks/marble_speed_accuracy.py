@@ -88,6 +88,9 @@ def matched(rows, floors, wall_key):
     (errors under the noise floors count as equal to them); print the ratio."""
     la = [r for r in rows if r["family"] == "LAMMPS" and not r["reference"]
           and r[wall_key] == r[wall_key]]
+    if not la:
+        print("no 1-rank LAMMPS run to set lockgraph against")
+        return
     for lg in (r for r in rows if r["family"] in ONE_THREAD):
         if lg[wall_key] != lg[wall_key]:
             print(f"{lg['method']}: the marble is not at rest on every bed")
