@@ -438,19 +438,36 @@ def bound_node(anc, reach, ntop, nd, nbox, nreach):
     if left < 0:
         s = ntop[nd, START]
         e = ntop[nd, END]
-        for a in range(3):
-            nbox[nd, a] = np.inf
-            nbox[nd, 3 + a] = -np.inf
+        # in locals, not in nbox: nbox may alias anc for all numba knows, so
+        # bounds kept in it were stored and loaded again for every particle
+        # (measured: node_bounds at N = 2e5 3.6-7.5 ms before)
+        x0 = y0 = z0 = np.inf
+        x1 = y1 = z1 = -np.inf
         mr = 0.0
-        for k in range(s, e):
-            for a in range(3):
-                v = anc[k, a]
-                if v < nbox[nd, a]:
-                    nbox[nd, a] = v
-                if v > nbox[nd, 3 + a]:
-                    nbox[nd, 3 + a] = v
+        for k in range(s, e):  # the same comparisons as before, bit for bit
+            v = anc[k, 0]
+            if v < x0:
+                x0 = v
+            if v > x1:
+                x1 = v
+            v = anc[k, 1]
+            if v < y0:
+                y0 = v
+            if v > y1:
+                y1 = v
+            v = anc[k, 2]
+            if v < z0:
+                z0 = v
+            if v > z1:
+                z1 = v
             if reach[k] > mr:
                 mr = reach[k]
+        nbox[nd, 0] = x0
+        nbox[nd, 1] = y0
+        nbox[nd, 2] = z0
+        nbox[nd, 3] = x1
+        nbox[nd, 4] = y1
+        nbox[nd, 5] = z1
         nreach[nd] = mr
     else:
         right = ntop[nd, RIGHT]
