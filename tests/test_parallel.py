@@ -479,17 +479,54 @@ def test_options_are_checked():
         Engine(st, ph, 0.05, threads=2, schedule="fast")
     with pytest.raises(InputError, match="^schedule: 'auto' .* only under policy 'exact'"):
         Engine(st, ph, 0.05, threads=2, schedule="auto", policy="paper")
+    for bad in (-1, True, 1.5, "4"):
+        with pytest.raises(InputError, match="^balance: must be an integer >= 0"):
+            Engine(st, ph, 0.05, threads=2, balance=bad)
 
 
+def test_claimed_tasks_come_back_in_order_and_a_failure_is_raised():
+    """Engine._claimed: the threads claim tasks in turn; results are in task
+    order whoever ran them, each thread passes its own index (for its scratch
+    buffers), and a failing task is raised in the caller, the pool still
+    usable afterwards."""
+    st = random_gas(20, 1, 0.0)
+    ph = Physics(PeriodicCube(12.0), (), Constant(1.0))
+    for balance in (0, 4):
+        eng = Engine(st, ph, 0.05, threads=2, balance=balance)
+        try:
+            seen = set()
+
+            def task(i, k):
+                seen.add(k)
+                time.sleep(0.001)  # let both threads claim
+                return 10 * i
+
+            assert eng._claimed(task, 16, lambda i, k: (i, k)) == [10 * i for i in range(16)]
+            assert seen == {0, 1}
+
+            def failing(i):
+                if i == 5:
+                    raise ValueError("task 5")
+                return i
+            with pytest.raises(ValueError, match="task 5"):
+                eng._claimed(failing, 16, lambda i, k: (i,))
+            assert eng._claimed(failing, 4, lambda i, k: (i,)) == [0, 1, 2, 3]
+        finally:
+            eng.close()
+
+
+@pytest.mark.parametrize("balance", [None, 0])
 @pytest.mark.parametrize("name", ["ring_moonlet", "dish_marble"])
-def test_auto_schedule_equals_sequential_whichever_way_steps_run(sequential, name):
+def test_auto_schedule_equals_sequential_whichever_way_steps_run(sequential, name, balance):
     """schedule="auto": the steps whose events run on one thread and those on the
     worker threads interleave (the scheduler's measurements are overridden to
     force both ways and the switches between them), and the run still has the
-    sequential state and collision sequences bit for bit."""
+    sequential state and collision sequences bit for bit, with the claimed
+    phases (first predictions, permutation) claimed in eighths or shared in
+    fixed halves."""
     sc, want_hash, want_seq = sequential(name, "late")
     eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, threads=2,
-                 schedule="auto")
+                 schedule="auto", balance=balance)
     ways = []
     try:
         for k in range(STEPS[name]):
