@@ -366,37 +366,35 @@ class Engine:
         return self.workers.map(fn, arglist)
 
     def _claimed(self, fn, ntasks, args_of):
-        """[fn(*args_of(i, k)) for i in range(ntasks)]: with ``balance`` > 0 the
-        threads claim the tasks in turn (k: the claiming thread, for its own
-        scratch buffers), otherwise task i runs on thread i % threads.
+        """[fn(*args_of(i, k)) for i in range(ntasks)] on the threads, k being
+        the thread that runs task i (for its own scratch buffers): with
+        ``balance`` > 0 the threads claim the tasks in turn, otherwise thread
+        k runs tasks k, k + T, ...
 
         Why claimed: a fixed share per thread waits for the slower share, and
         shares of equal size are uneven when the work is.  On the 50,000-grain
-        bed the first predictions of the dense bottom half took 3.4-3.6 ms
-        against the top half's 1.9-3.0; claimed in eighths, 2.8-3.2 ms
-        (against 5.2-5.9 on one thread), and the permutation (arrays of 3 and
-        of 1 column) 0.70-0.71 ms against 0.75-1.17.  Results are per task,
-        so which thread ran a task changes nothing."""
+        bed the first predictions of the dense bottom half took 4.5 ms against
+        the top half's 3.0 (one run); claimed in eighths the phase took
+        2.0-3.2 ms against 3.3-3.6 in halves (three runs, 5.1-5.9 on one
+        thread).  Results are per task, so which thread ran a task changes
+        nothing."""
         if self.workers is None or ntasks <= 1:
             return [fn(*args_of(i, 0)) for i in range(ntasks)]
-        if self.balance <= 0:
-            t = self.threads
-            return self.workers.map(fn, [args_of(i, i % t) for i in range(ntasks)])
+        t = self.threads
         claim = itertools.count()  # next() is atomic under the GIL
         out = [None] * ntasks
         stop = []
 
-        def claimer(k):
+        def run(k):
             try:
-                while not stop:
-                    i = next(claim)
-                    if i >= ntasks:
+                for i in (claim if self.balance > 0 else range(k, ntasks, t)):
+                    if i >= ntasks or stop:
                         return
                     out[i] = fn(*args_of(i, k))
             except BaseException:
-                stop.append(k)  # the others claim no more; map raises this
+                stop.append(k)  # the others take no more; map raises this
                 raise
-        self.workers.map(claimer, [(k,) for k in range(self.threads)])
+        self.workers.map(run, [(k,) for k in range(t)])
         return out
 
     def _slices(self):
