@@ -1,7 +1,8 @@
 """What a domain split with a particle band could gain at best on the events.
 
     python benchmarks/band_bound.py [--cases dish_marble_dem] [--steps 6]
-                                    [--levels 1,2,3] [--cut cost] [--sync 0,2e-7]
+                                    [--levels 1,2,3] [--depths 0,1,2,4] [--cut cost]
+                                    [--sync 0,2e-7]
 
 Records a sequential trace (every event, its cost in cycles) and each step's
 candidate lists, cuts each step's particles into two domains, and re-plays the
@@ -12,7 +13,10 @@ before it in the sequential order; the others run as soon as their thread is
 free.  Printed per case, level count and sync cost: the band's share of the
 events and the events phase's 2-thread speedup over the trace's one-thread
 cost, without and with free events running ahead of a waiting band event
-(violations assumed away: an upper bound for a design that checks them).
+(an upper bound for a design that checks them), with the events a schedule
+ran against the sequential order on a particle they share (``clashes``) and
+the share of events that started before an earlier band event of their own
+domain (``ran ahead``: what such a design must be able to undo).
 ``sync`` is added to every band event (a clock handed between cores).
 
 Cuts (in the tree's storage order, so each domain is a run of tree nodes):
@@ -81,6 +85,19 @@ def cut_domains(n, si, sj, cost, how):
     return (np.arange(n) >= c).astype(np.int64)
 
 
+def ran_ahead(edom, band, start):
+    """Events started before a band event of their domain that precedes them
+    in the sequential order (what a run-ahead design must be able to undo)."""
+    n = 0
+    for d in np.unique(edom):
+        idx = np.flatnonzero(edom == d)  # key order
+        bstart = np.where(band[idx], start[idx], -np.inf)
+        # the latest start among the domain's earlier band events
+        before = np.maximum.accumulate(np.r_[-np.inf, bstart[:-1]])
+        n += int(np.count_nonzero(before > start[idx]))
+    return n
+
+
 def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
     trace, cps = record(name, n, steps, bed_code, bed_steps)
     rows = {}
@@ -104,21 +121,23 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
                         span, _, fin = band_schedule(edom, band, cost, True, sync, finish=True,
                                                      ahead=~deeper)
                     nc = order_conflicts(si, sj, ev["kind"], noff, nent, fin - cost_s, fin)
-                    r = rows.setdefault((lv, sync, -1 if depth is None else depth), np.zeros(7))
-                    r += [cost.sum(), span, halves, band.sum(), len(cost), nc > 0, nc]
+                    r = rows.setdefault((lv, sync, -1 if depth is None else depth), np.zeros(8))
+                    r += [cost.sum(), span, halves, band.sum(), len(cost), nc > 0, nc,
+                          ran_ahead(edom, band, fin - cost_s)]
     k = len(trace)
     print(f"\n{name}: N = {n}, {k} steps recorded, cut by {cut}; the events phase on 2 "
           f"virtual threads with no coordination cost but `sync` per band event; "
           f"ahead: free events that many hops beyond the band run ahead of a waiting one "
           f"(-: none); clash steps: steps with an event run against the sequential order, "
-          f"clashes: such events")
+          f"clashes: such events; ran ahead: events started before an earlier band event "
+          f"of their domain")
     print(f"  {'levels':>6s} {'sync ns':>8s} {'band events':>12s} {'1 thread ms':>12s} "
           f"{'halves alone':>13s} {'ahead':>6s} {'2 threads':>10s} {'clash steps':>12s} "
-          f"{'clashes/step':>13s}")
-    for (lv, sync, depth), (seq, span, half, nb, ne, bad, nc) in sorted(rows.items()):
+          f"{'clashes/step':>13s} {'ran ahead':>10s}")
+    for (lv, sync, depth), (seq, span, half, nb, ne, bad, nc, ra) in sorted(rows.items()):
         print(f"  {lv:6d} {sync * 1e9:8.0f} {nb / ne:12.1%} {seq / k * 1e3:12.2f} "
               f"{seq / half:12.2f}x {'-' if depth < 0 else depth:>6} {seq / span:9.2f}x "
-              f"{bad:8.0f}/{k} {nc / k:13.0f}")
+              f"{bad:8.0f}/{k} {nc / k:13.0f} {ra / ne:10.1%}")
 
 
 def main():
