@@ -36,7 +36,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.parallel_speedup import CASES, load_case, parse_cases, say  # noqa: E402
+from benchmarks.parallel_speedup import add_case_options, load_case, parse_cases, say  # noqa: E402
 from lockgraph.band_replay import band_schedule, event_domains, order_conflicts, particle_levels  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
@@ -142,16 +142,13 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="dish_marble_dem", help=f"subset of {','.join(CASES)}")
-    ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
+    add_case_options(ap, "dish_marble_dem")
     ap.add_argument("--steps", type=int, default=6)
     ap.add_argument("--levels", default="1,2,3", help="band depths in candidate-list hops")
     ap.add_argument("--depths", default="0,1,2,4",
                     help="run-ahead depths: free events this many hops beyond the band")
     ap.add_argument("--cut", default="cost", choices=("cost", "count"))
     ap.add_argument("--sync", default="0,2e-7", help="seconds added to each band event")
-    ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"))
-    ap.add_argument("--bed-steps", type=int, default=100)
     args = ap.parse_args()
     names, sizes = parse_cases(ap, args.cases, args.n)
     levels = [int(x) for x in args.levels.split(",")]

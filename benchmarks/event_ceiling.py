@@ -35,7 +35,7 @@ import numpy as np
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
-from benchmarks.parallel_speedup import CASES, load_case, parse_cases, say  # noqa: E402
+from benchmarks.parallel_speedup import add_case_options, load_case, parse_cases, say  # noqa: E402
 from lockgraph import kernels as K  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
@@ -140,13 +140,10 @@ def ceiling(name, n, steps, repeats, axis, bed_code, bed_steps):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", default="dish_marble_dem", help=f"subset of {','.join(CASES)}")
-    ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
+    add_case_options(ap, "dish_marble_dem")
     ap.add_argument("--steps", type=int, default=12)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--axis", default="x", choices=("x", "y", "z"))
-    ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"))
-    ap.add_argument("--bed-steps", type=int, default=100)
     args = ap.parse_args()
     names, sizes = parse_cases(ap, args.cases, args.n)
     compile_kernels()

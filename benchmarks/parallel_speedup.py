@@ -108,6 +108,19 @@ def parse_locks(text):
     return out
 
 
+def add_case_options(ap, cases):
+    """The options that choose cases and their beds (``--cases`` defaulting to
+    ``cases``, ``--n CASE=N``, ``--bed-code``, ``--bed-steps``); read them
+    with ``parse_cases``."""
+    ap.add_argument("--cases", default=cases, help=f"subset of {','.join(CASES)} ({cases})")
+    ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
+    ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
+                    help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
+    ap.add_argument("--bed-steps", type=int, default=100,
+                    help="deep_bed, dish_marble_dem: sequential steps of the falling "
+                         "marble before timing (100)")
+
+
 def parse_cases(ap, cases, n_items, quick=False):
     """(case names, N per case) from ``--cases`` and ``--n CASE=N`` items;
     ``ap.error`` on an unknown case or a malformed N (before any compiling)."""
@@ -262,18 +275,12 @@ def print_case(name, res):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="smaller N (a few minutes)")
-    ap.add_argument("--cases", default="ring,dish_marble,dish", help=f"subset of {','.join(CASES)}")
-    ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
+    add_case_options(ap, "ring,dish_marble,dish")
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto",
                     help="graph:SCALE[:unmerged|:auto], grid, grid3d, ... "
                          "(graph:1.2,graph:4,graph:16,grid,graph:4:auto)")
-    ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
-                    help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
-    ap.add_argument("--bed-steps", type=int, default=100,
-                    help="deep_bed, dish_marble_dem: sequential steps of the falling "
-                         "marble before timing (100)")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()
     locks = parse_locks(args.locks)

@@ -51,3 +51,15 @@ def brute_max_overlap(state, domain):
             np.fill_diagonal(ov, -np.inf)
         worst = max(worst, float(ov.max()))
     return worst
+
+
+def symmetric_csr(n, edges, dtype=np.int32):
+    """Symmetric CSR adjacency (offsets (n + 1,), sorted neighbours) of n
+    nodes from (u, v) edges, duplicates merged."""
+    adj = [set() for _ in range(n)]
+    for u, v in edges:
+        adj[u].add(v)
+        adj[v].add(u)
+    off = np.zeros(n + 1, np.int64)
+    off[1:] = np.cumsum([len(a) for a in adj])
+    return off, np.array([v for a in adj for v in sorted(a)], dtype)

@@ -7,20 +7,17 @@ import pytest
 
 from lockgraph.band_replay import band_schedule, event_domains, order_conflicts, particle_levels
 
+from .helpers import symmetric_csr
+
 
 def random_lists(rng, n, m):
-    """Symmetric candidate lists (CSR) of m random pairs among n particles."""
+    """Symmetric candidate lists (CSR) of m random pairs among n particles,
+    and each particle's candidates as a set."""
     a = rng.integers(0, n, m)
     b = rng.integers(0, n, m)
     keep = a != b
-    pairs = {(int(x), int(y)) for x, y in zip(a[keep], b[keep])}
-    adj = [set() for _ in range(n)]
-    for x, y in pairs:
-        adj[x].add(y)
-        adj[y].add(x)
-    noff = np.zeros(n + 1, np.int64)
-    noff[1:] = np.cumsum([len(s) for s in adj])
-    nent = np.array([y for s in adj for y in sorted(s)], np.int64)
+    noff, nent = symmetric_csr(n, zip(a[keep], b[keep]), np.int64)
+    adj = [set(nent[noff[i]:noff[i + 1]].tolist()) for i in range(n)]
     return adj, noff, nent
 
 

@@ -9,6 +9,8 @@ import pytest
 
 from lockgraph import replay as R
 
+from .helpers import symmetric_csr as csr
+
 CPS = 1e9
 KEY = ("graph", 1.0)
 # Sums of the same costs added in a different order (the replay adds start
@@ -35,18 +37,6 @@ def events(i, j, cycles, kind=None):
     ev["cycles"] = np.broadcast_to(np.asarray(cycles, np.float64), len(i))
     ev["kind"] = (np.where(j < 0, 1, 0) if kind is None else kind)
     return ev
-
-
-def csr(nregions, edges):
-    """Symmetric CSR adjacency from a list of (u, v) edges."""
-    adj = [set() for _ in range(nregions)]
-    for u, v in edges:
-        adj[u].add(v)
-        adj[v].add(u)
-    loff = np.zeros(nregions + 1, np.int64)
-    loff[1:] = np.cumsum([len(a) for a in adj])
-    ladj = np.array([v for a in adj for v in sorted(a)], np.int32)
-    return loff, ladj
 
 
 def grid_edges(nx, ny):
