@@ -8,7 +8,8 @@
 #   ./dev.sh bench [throughput|parallel|ceiling|band|tables|rebound|dem|marble|deep_marble] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
 #                     2-thread speedup, its ceiling on this machine (two
-#                     halves at once), a band split's ideal schedule by
+#                     halves at once), a band split's ideal schedule (and K domains
+#                     shared by the threads) by
 #                     replay, the paper's tables by replay, speed
 #                     against accuracy versus REBOUND or LAMMPS/LIGGGHTS
 #                     (settling dish; marble stop), or the paper-scale marble

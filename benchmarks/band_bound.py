@@ -2,7 +2,7 @@
 
     python benchmarks/band_bound.py [--cases dish_marble_dem] [--steps 6]
                                     [--levels 1,2,3] [--depths 0,1,2,4] [--cut cost]
-                                    [--sync 0,2e-7]
+                                    [--sync 0,2e-7] [--domains 2,4,8] [--threads 2]
 
 Records a sequential trace (every event, its cost in cycles) and each step's
 candidate lists, cuts each step's particles into two domains, and re-plays the
@@ -18,6 +18,16 @@ ran against the sequential order on a particle they share (``clashes``) and
 the share of events that started before an earlier band event of their own
 domain (``ran ahead``: what such a design must be able to undo).
 ``sync`` is added to every band event (a clock handed between cores).
+
+Then the same trace on ``--threads`` virtual threads shared by ``--domains``
+domains (``band_replay.pool_schedule``): each domain runs its events in key
+order; an event waits only for the domains within two candidate hops of its
+particles (the depth that keeps the sequential order, tested), until none of
+theirs with a smaller key is pending or running; a thread whose domains wait
+takes another.  ``known``: every event is known from the start (the bound);
+``seen``: an event exists only once the event that last wrote one of its
+particles has finished, as in an engine that reads its neighbours' queues
+(with the events then run against the sequential order, ``clashes``).
 
 Cuts (in the tree's storage order, so each domain is a run of tree nodes):
 ``cost`` at equal shares of the step's traced event cost (the best balance
@@ -37,12 +47,18 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from benchmarks.parallel_speedup import add_case_options, load_case, parse_cases, say  # noqa: E402
-from lockgraph.band_replay import band_schedule, event_domains, order_conflicts, particle_levels  # noqa: E402
+from lockgraph.band_replay import (band_schedule, creators, domain_masks, event_domains,  # noqa: E402
+                                   event_waits, order_conflicts, particle_levels, pool_schedule,
+                                   MAX_DOMAINS)
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
 # the candidate list entries hold the slot above 5 flag bits (neighbors.py)
 SLOT_SHIFT = 5
+# the pool's waits reach this many candidate hops: an event writes its own
+# particles and reads their candidates, so two events sharing a particle that
+# one writes have particles within two hops (tests/test_band_replay.py)
+POOL_LEVELS = 2
 
 
 def record(name, n, steps, bed_code, bed_steps):
@@ -71,18 +87,18 @@ def record(name, n, steps, bed_code, bed_steps):
     return [(st["events"],) + lst for st, lst in zip(tr["steps"], lists)], tr["cycles_per_second"]
 
 
-def cut_domains(n, si, sj, cost, how):
-    """Domain (0 or 1) of each slot."""
+def cut_domains(n, si, sj, cost, how, k=2):
+    """Domain (0 .. k - 1) of each slot: k runs of slots."""
     if how == "count":
-        c = n // 2
+        cuts = n * np.arange(1, k) // k
     else:
         load = np.zeros(n)
         np.add.at(load, si, 0.5 * cost)
         has = sj >= 0
         np.add.at(load, sj[has], 0.5 * cost[has])
         cum = np.cumsum(load)
-        c = int(np.searchsorted(cum, 0.5 * cum[-1]))
-    return (np.arange(n) >= c).astype(np.int64)
+        cuts = np.searchsorted(cum, cum[-1] * np.arange(1, k) / k)
+    return np.searchsorted(cuts, np.arange(n), side="right").astype(np.int64)
 
 
 def ran_ahead(edom, band, start):
@@ -98,7 +114,29 @@ def ran_ahead(edom, band, start):
     return n
 
 
-def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
+def pool(trace, cps, cut, syncs, domains, threads):
+    """The pool's rows: (domains, sync, known/seen) -> summed
+    (1-thread cost, makespan, waiting events, events, clash steps, clashes)."""
+    rows = {}
+    for ev, slot, noff, nent in trace:
+        si = slot[ev["i"]]
+        sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
+        cost = ev["cycles"] / cps
+        made = creators(si, sj, ev["kind"])
+        for k in domains:
+            dom = cut_domains(slot.shape[0], si, sj, cost, cut, k)
+            edom, wait = event_waits(si, sj, dom, domain_masks(noff, nent, dom, POOL_LEVELS))
+            for sync in syncs:
+                for seen in (False, True):
+                    span, start, fin = pool_schedule(edom, wait, cost, threads,
+                                                     made if seen else None, sync)
+                    nc = order_conflicts(si, sj, ev["kind"], noff, nent, start, fin)
+                    r = rows.setdefault((k, sync, seen), np.zeros(6))
+                    r += [cost.sum(), span, np.count_nonzero(wait), len(cost), nc > 0, nc]
+    return rows
+
+
+def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domains, threads):
     trace, cps = record(name, n, steps, bed_code, bed_steps)
     rows = {}
     for ev, slot, noff, nent in trace:
@@ -107,23 +145,23 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
         cost = ev["cycles"] / cps
         dom = cut_domains(slot.shape[0], si, sj, cost, cut)
         for lv in levels:
-            lvl = particle_levels(noff, nent, dom, lv + max(depths))
+            lvl = particle_levels(noff, nent, dom, lv + max(depths, default=0))
             edom, band = event_domains(si, sj, dom, np.minimum(lvl, lv + 1), lv)
             halves = max(cost[edom == d].sum() for d in (0, 1))
             for sync in syncs:
-                cost_s = cost + np.where(band, sync, 0.0)
                 for depth in [None] + depths:
                     if depth is None:  # the band rule alone
-                        span, _, fin = band_schedule(edom, band, cost, False, sync, finish=True)
+                        span, _, fin, start = band_schedule(edom, band, cost, False, sync,
+                                                            finish=True)
                     else:  # free events at least `depth` hops beyond the band run ahead
                         _, deeper = event_domains(si, sj, dom, np.minimum(lvl, lv + depth + 1),
                                                   lv + depth)
-                        span, _, fin = band_schedule(edom, band, cost, True, sync, finish=True,
-                                                     ahead=~deeper)
-                    nc = order_conflicts(si, sj, ev["kind"], noff, nent, fin - cost_s, fin)
+                        span, _, fin, start = band_schedule(edom, band, cost, True, sync,
+                                                            finish=True, ahead=~deeper)
+                    nc = order_conflicts(si, sj, ev["kind"], noff, nent, start, fin)
                     r = rows.setdefault((lv, sync, -1 if depth is None else depth), np.zeros(8))
                     r += [cost.sum(), span, halves, band.sum(), len(cost), nc > 0, nc,
-                          ran_ahead(edom, band, fin - cost_s)]
+                          ran_ahead(edom, band, start)]
     k = len(trace)
     print(f"\n{name}: N = {n}, {k} steps recorded, cut by {cut}; the events phase on 2 "
           f"virtual threads with no coordination cost but `sync` per band event; "
@@ -138,6 +176,19 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps):
         print(f"  {lv:6d} {sync * 1e9:8.0f} {nb / ne:12.1%} {seq / k * 1e3:12.2f} "
               f"{seq / half:12.2f}x {'-' if depth < 0 else depth:>6} {seq / span:9.2f}x "
               f"{bad:8.0f}/{k} {nc / k:13.0f} {ra / ne:10.1%}")
+    if not domains:
+        return
+    print(f"\n{name}: the same steps on {threads} virtual threads shared by K domains (runs of "
+          f"slots cut by {cut}); an event waits for the domains within {POOL_LEVELS} hops "
+          f"(waiting events), with every event known from the start or seen only once its "
+          f"creator finished; clash steps and clashes as above")
+    print(f"  {'domains':>7s} {'sync ns':>8s} {'waiting events':>15s} {'events are':>11s} "
+          f"{'1 thread ms':>12s} {f'{threads} threads':>10s} {'clash steps':>12s} "
+          f"{'clashes/step':>13s}")
+    for (dk, sync, seen), (seq, span, nw, ne, bad, nc) in sorted(
+            pool(trace, cps, cut, syncs, domains, threads).items()):
+        print(f"  {dk:7d} {sync * 1e9:8.0f} {nw / ne:15.1%} {'seen' if seen else 'known':>11s} "
+              f"{seq / k * 1e3:12.2f} {seq / span:9.2f}x {bad:8.0f}/{k} {nc / k:13.0f}")
 
 
 def main():
@@ -149,17 +200,23 @@ def main():
                     help="run-ahead depths: free events this many hops beyond the band")
     ap.add_argument("--cut", default="cost", choices=("cost", "count"))
     ap.add_argument("--sync", default="0,2e-7", help="seconds added to each band event")
+    ap.add_argument("--domains", default="2,4,8",
+                    help="domain counts for the pool of threads ('' for none)")
+    ap.add_argument("--threads", type=int, default=2, help="the pool's threads")
     args = ap.parse_args()
     names, sizes = parse_cases(ap, args.cases, args.n)
     levels = [int(x) for x in args.levels.split(",")]
     syncs = [float(x) for x in args.sync.split(",")]
     depths = [int(x) for x in args.depths.split(",")] if args.depths else []
+    domains = [int(x) for x in args.domains.split(",")] if args.domains else []
     if args.steps < 1 or min(levels) < 1 or min(syncs) < 0 or min(depths + [0]) < 0:
         ap.error("--steps and --levels must be >= 1, --sync and --depths >= 0")
+    if args.threads < 1 or not all(1 <= k <= MAX_DOMAINS for k in domains):
+        ap.error(f"--threads must be >= 1 and --domains 1..{MAX_DOMAINS}")
     compile_kernels()
     for name in names:
         bound(name, sizes[name], args.steps, levels, depths, args.cut, syncs, args.bed_code,
-              args.bed_steps)
+              args.bed_steps, domains, args.threads)
 
 
 if __name__ == "__main__":

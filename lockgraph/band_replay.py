@@ -30,10 +30,30 @@ Model, per step:
   plus ``sync`` seconds for a band event (handing a clock from core to core).
 
 Nothing else a step does (tree, search, first predictions) is modelled.
+
+**More domains than threads** (``pool_schedule``): the step's particles are
+cut into K domains and T < K threads take whichever domain can go on.  Each
+domain runs its events one at a time in key order; an event waits only for
+the domains within ``levels`` candidate hops of its particles
+(``domain_masks``, ``event_waits``), not for all of them: there, until no
+event of theirs with a smaller key is pending or running.  With ``creator``
+an event exists only once the event that last wrote one of its particles
+(``creators``) has finished, as in an engine whose threads see each other's
+queues: a domain then runs its earliest event that exists, and waits only for
+neighbours' events that exist (``order_conflicts`` counts what that let
+through).  Two hops suffice for the sequential order: two events that share a
+particle, one writing it, have particles within two hops of each other (an
+event writes its own particles and reads their candidates).
 """
+import heapq
+
 import numpy as np
 
-__all__ = ["particle_levels", "event_domains", "band_schedule", "order_conflicts"]
+__all__ = ["particle_levels", "event_domains", "band_schedule", "order_conflicts",
+           "domain_masks", "event_waits", "creators", "pool_schedule"]
+
+# domains a wait mask (uint64) can name
+MAX_DOMAINS = 64
 
 
 def particle_levels(noff, nent, domain, levels):
@@ -78,8 +98,8 @@ def band_schedule(ev_domain, band, cost, runahead=False, sync=0.0, finish=False,
 
     ev_domain: (E,) domain of each event, band: (E,) bool, cost: (E,) seconds,
     all in key (trace) order.  Returns (makespan, per-domain busy seconds),
-    and with ``finish`` also each event's finish time (E,) (its start is the
-    finish less its cost, ``sync`` included for a band event).  ``ahead``
+    and with ``finish`` also each event's finish and start times (E,) each
+    (the start as scheduled: the finish less the cost need not round back to it).  ``ahead``
     (E,) bool, with ``runahead``: the events that may run ahead of a waiting
     band event (free ones only; default all free events); the other free
     events keep their place in key order among the band events.
@@ -90,6 +110,7 @@ def band_schedule(ev_domain, band, cost, runahead=False, sync=0.0, finish=False,
     ndom = int(ev_domain.max()) + 1 if ev_domain.size else 1
     lists = [np.flatnonzero(ev_domain == d) for d in range(ndom)]
     fin = np.zeros(cost.shape[0])
+    sta = np.zeros(cost.shape[0])
     ready = [0.0] * ndom
     # per domain: its events' finish times in key order, prefix maxima filled
     # lazily (only over events already finished)
@@ -135,6 +156,7 @@ def band_schedule(ev_domain, band, cost, runahead=False, sync=0.0, finish=False,
         return pending == np.inf, latest, pending
 
     def run(d, e, start):
+        sta[e] = start
         fin[e] = start + cost[e]
         ready[d] = fin[e]
 
@@ -191,7 +213,7 @@ def band_schedule(ev_domain, band, cost, runahead=False, sync=0.0, finish=False,
             raise RuntimeError("band_schedule: no event can start")
     busy = np.array([cost[lst].sum() for lst in lists])
     span = max(ready) if cost.shape[0] else 0.0
-    return (span, busy, fin) if finish else (span, busy)
+    return (span, busy, fin, sta) if finish else (span, busy)
 
 
 def order_conflicts(ev_i, ev_j, ev_kind, noff, nent, start, fin):
@@ -252,3 +274,148 @@ def order_conflicts(ev_i, ev_j, ev_kind, noff, nent, start, fin):
         hit = w & ((before > s_) | (after < f_))
         bad[t_ev[a:b][hit]] = True
     return int(bad.sum())
+
+
+def domain_masks(noff, nent, domain, levels):
+    """(N,) uint64: bit d set for each domain d with a particle within
+    ``levels`` candidate hops of the particle (its own domain included).
+
+    noff, nent: the step's candidate lists (CSR); domain: (N,) ints < 64.
+    """
+    noff = np.asarray(noff, np.int64)
+    nent = np.asarray(nent, np.int64)
+    domain = np.asarray(domain, np.int64)
+    n = domain.shape[0]
+    if noff.shape != (n + 1,) or nent.shape[0] != noff[-1]:
+        raise ValueError(f"noff must have shape ({n + 1},) and nent noff[-1] entries")
+    if n and not 0 <= domain.min() <= domain.max() < MAX_DOMAINS:
+        raise ValueError(f"domains must be 0..{MAX_DOMAINS - 1}")
+    if levels < 0:
+        raise ValueError(f"levels must be >= 0, got {levels}")
+    owner = np.repeat(np.arange(n), np.diff(noff))
+    mask = np.left_shift(np.uint64(1), domain.astype(np.uint64))
+    for _ in range(levels):
+        grown = mask.copy()
+        np.bitwise_or.at(grown, owner, mask[nent])
+        mask = grown
+    return mask
+
+
+def event_waits(ev_i, ev_j, domain, masks):
+    """(domain of each event, its wait mask): the other domains within reach
+    of either particle (``masks`` from ``domain_masks``; ev_j < 0: a wall)."""
+    ev_i = np.asarray(ev_i, np.int64)
+    ev_j = np.asarray(ev_j, np.int64)
+    edom = np.asarray(domain, np.int64)[ev_i]
+    wait = masks[ev_i] | np.where(ev_j >= 0, masks[np.maximum(ev_j, 0)], np.uint64(0))
+    return edom, wait & ~np.left_shift(np.uint64(1), edom.astype(np.uint64))
+
+
+def creators(ev_i, ev_j, ev_kind):
+    """(E,) for each event the latest earlier event that wrote one of its
+    particles (a pair collision, kind 0, writes i and j; the others i), -1
+    for none: the event that predicted it (or one before; -1: the step's
+    first predictions)."""
+    last = {}
+    out = np.full(len(ev_i), -1, np.int64)
+    for e, (i, j, k) in enumerate(zip(np.asarray(ev_i).tolist(), np.asarray(ev_j).tolist(),
+                                      np.asarray(ev_kind).tolist())):
+        out[e] = max(last.get(i, -1), last.get(j, -1) if j >= 0 else -1)
+        last[i] = e
+        if k == 0 and j >= 0:
+            last[j] = e
+    return out
+
+
+def pool_schedule(ev_domain, wait, cost, threads, creator=None, sync=0.0):
+    """(makespan, start (E,), finish (E,)) of the events on ``threads``
+    virtual threads shared by the domains.
+
+    ev_domain: (E,) domain of each event, wait: (E,) uint64 mask of the
+    domains it waits for, cost: (E,) seconds (plus ``sync`` when it waits
+    for any), all in key order.  A thread that is free takes, among the
+    domains running nothing, the one whose next event has the least key and
+    may start; a domain's next event is its earliest that exists (with
+    ``creator`` (E,): once its creator has finished, -1 from the start;
+    without, every event from the start); it may start when every domain of
+    its mask has no existing event with a smaller key unfinished.
+    """
+    ev_domain = np.asarray(ev_domain, np.int64)
+    wait = np.asarray(wait, np.uint64)
+    cost = np.asarray(cost, np.float64) + np.where(wait != 0, float(sync), 0.0)
+    e_all = cost.shape[0]
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
+    cr = np.full(e_all, -1, np.int64) if creator is None else np.asarray(creator, np.int64)
+    if cr.shape != (e_all,) or (cr >= np.arange(e_all)).any():
+        raise ValueError("creator must give (E,) events each before its own")
+    ndom = int(ev_domain.max()) + 1 if e_all else 0
+    lists = [np.flatnonzero(ev_domain == d) for d in range(ndom)]
+    fin = np.full(e_all, np.inf)
+    sta = np.full(e_all, np.inf)
+    started = np.zeros(e_all, bool)
+    base = [0] * ndom  # every event of lists[d][:base[d]] has started
+    running = [False] * ndom
+    chunk = 4096
+
+    def exists(idx, t):
+        c = cr[idx]
+        return (c < 0) | (fin[np.maximum(c, 0)] <= t)
+
+    def next_of(d, t):
+        lst = lists[d]
+        b = base[d]
+        while b < len(lst) and started[lst[b]]:
+            b += 1
+        base[d] = b
+        while b < len(lst):
+            seg = lst[b:b + chunk]
+            k = np.flatnonzero(~started[seg] & exists(seg, t))
+            if k.size:
+                return int(seg[k[0]])
+            b += chunk
+        return -1
+
+    def may_start(e, d, t):
+        w = int(wait[e])
+        for o in range(ndom):
+            if o != d and (w >> o) & 1:
+                seg = lists[o][base[o]:int(np.searchsorted(lists[o], e))]
+                if seg.size == 0:
+                    continue
+                done = started[seg]
+                if (~done & exists(seg, t)).any() or (fin[seg[done]] > t).any():
+                    return False
+        return True
+
+    t = 0.0
+    free = threads
+    heap = []
+    left = e_all
+    while left:
+        while free:
+            best_d, best_e = -1, -1
+            for d in range(ndom):
+                if running[d]:
+                    continue
+                e = next_of(d, t)
+                if e >= 0 and (best_e < 0 or e < best_e) and may_start(e, d, t):
+                    best_d, best_e = d, e
+            if best_e < 0:
+                break
+            sta[best_e] = t
+            fin[best_e] = t + cost[best_e]
+            started[best_e] = True
+            running[best_d] = True
+            free -= 1
+            left -= 1
+            heapq.heappush(heap, (fin[best_e], best_d))
+        if not heap:
+            raise RuntimeError("pool_schedule: no event can start")
+        t, d = heapq.heappop(heap)
+        running[d] = False
+        free += 1
+        while heap and heap[0][0] <= t:
+            running[heapq.heappop(heap)[1]] = False
+            free += 1
+    return (float(fin.max()) if e_all else 0.0), sta, fin
