@@ -27,7 +27,10 @@ theirs with a smaller key is pending or running; a thread whose domains wait
 takes another.  ``known``: every event is known from the start (the bound);
 ``seen``: an event exists only once the event that last wrote one of its
 particles has finished, as in an engine that reads its neighbours' queues
-(with the events then run against the sequential order, ``clashes``).
+(with the events then run against the sequential order, ``clashes``).  Also
+with the waits by lock region (``regions``: the domains within two hops of
+the event's regions in the lock graph at SCALE 4, as an engine that knows
+only regions would wait; ``band_replay.region_waits``).
 
 Cuts (in the tree's storage order, so each domain is a run of tree nodes):
 ``cost`` at equal shares of the step's traced event cost (the best balance
@@ -47,9 +50,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 
 from benchmarks.parallel_speedup import add_case_options, load_case, parse_cases, say  # noqa: E402
-from lockgraph.band_replay import (band_schedule, creators, domain_masks, event_domains,  # noqa: E402
-                                   event_waits, order_conflicts, particle_levels, pool_schedule,
-                                   MAX_DOMAINS)
+from lockgraph.band_replay import (  # noqa: E402
+    MAX_DOMAINS, band_schedule, creators, domain_masks, event_domains, event_waits,
+    order_conflicts, particle_levels, pool_schedule, region_waits)
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
@@ -59,13 +62,16 @@ SLOT_SHIFT = 5
 # particles and reads their candidates, so two events sharing a particle that
 # one writes have particles within two hops (tests/test_band_replay.py)
 POOL_LEVELS = 2
+# the lock graph recorded for the pool's waits by region (the engine's default SCALE)
+REGION_SCALE = 4.0
 
 
 def record(name, n, steps, bed_code, bed_steps):
-    """Per step: (events structured array, slot of each id, noff, candidate slots),
-    and the cycle counter's frequency."""
+    """Per step: (events structured array, slot of each id, noff, candidate slots,
+    (lock region of each slot, loff, ladj) of the lock graph at SCALE
+    REGION_SCALE), and the cycle counter's frequency."""
     sc = load_case(name, n, bed_code, bed_steps)
-    eng = Engine(sc.state, sc.physics, sc.dt, trace_locks=[("graph", 4.0)])
+    eng = Engine(sc.state, sc.physics, sc.dt, trace_locks=[("graph", REGION_SCALE)])
     lists = []
     inner = eng._events_sequential
 
@@ -84,7 +90,13 @@ def record(name, n, steps, bed_code, bed_steps):
         tr = eng.trace()
     finally:
         eng.close()
-    return [(st["events"],) + lst for st, lst in zip(tr["steps"], lists)], tr["cycles_per_second"]
+    out = []
+    for st, (slot, noff, nent) in zip(tr["steps"], lists):
+        by_id, loff, ladj = st["locks"][("graph", REGION_SCALE)]
+        region = np.empty(slot.shape[0], np.int64)
+        region[slot] = by_id
+        out.append((st["events"], slot, noff, nent, (region, loff, ladj)))
+    return out, tr["cycles_per_second"]
 
 
 def cut_domains(n, si, sj, cost, how, k=2):
@@ -115,23 +127,28 @@ def ran_ahead(edom, band, start):
 
 
 def pool(trace, cps, cut, syncs, domains, threads):
-    """The pool's rows: (domains, sync, known/seen) -> summed
+    """The pool's rows: (domains, sync, waits by, known/seen) -> summed
     (1-thread cost, makespan, waiting events, events, clash steps, clashes)."""
     rows = {}
-    for ev, slot, noff, nent in trace:
+    for ev, slot, noff, nent, (region, loff, ladj) in trace:
         si = slot[ev["i"]]
         sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
         cost = ev["cycles"] / cps
         made = creators(si, sj, ev["kind"])
         for k in domains:
             dom = cut_domains(slot.shape[0], si, sj, cost, cut, k)
-            edom, wait = event_waits(si, sj, dom, domain_masks(noff, nent, dom, POOL_LEVELS))
+            waits = {"particles": event_waits(si, sj, dom,
+                                              domain_masks(noff, nent, dom, POOL_LEVELS)),
+                     "regions": region_waits(si, sj, dom, region, loff, ladj, POOL_LEVELS)}
             for sync in syncs:
-                for seen in (False, True):
+                # (the events seen only once created: by particles; they waited
+                # as if known in every run tried)
+                for by, seen in (("particles", False), ("particles", True), ("regions", False)):
+                    edom, wait = waits[by]
                     span, start, fin = pool_schedule(edom, wait, cost, threads,
                                                      made if seen else None, sync)
                     nc = order_conflicts(si, sj, ev["kind"], noff, nent, start, fin)
-                    r = rows.setdefault((k, sync, seen), np.zeros(6))
+                    r = rows.setdefault((k, sync, by, seen), np.zeros(6))
                     r += [cost.sum(), span, np.count_nonzero(wait), len(cost), nc > 0, nc]
     return rows
 
@@ -139,7 +156,7 @@ def pool(trace, cps, cut, syncs, domains, threads):
 def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domains, threads):
     trace, cps = record(name, n, steps, bed_code, bed_steps)
     rows = {}
-    for ev, slot, noff, nent in trace:
+    for ev, slot, noff, nent, _ in trace:
         si = slot[ev["i"]]
         sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
         cost = ev["cycles"] / cps
@@ -180,15 +197,17 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domai
         return
     print(f"\n{name}: the same steps on {threads} virtual threads shared by K domains (runs of "
           f"slots cut by {cut}); an event waits for the domains within {POOL_LEVELS} hops "
-          f"(waiting events), with every event known from the start or seen only once its "
-          f"creator finished; clash steps and clashes as above")
-    print(f"  {'domains':>7s} {'sync ns':>8s} {'waiting events':>15s} {'events are':>11s} "
-          f"{'1 thread ms':>12s} {f'{threads} threads':>10s} {'clash steps':>12s} "
-          f"{'clashes/step':>13s}")
-    for (dk, sync, seen), (seq, span, nw, ne, bad, nc) in sorted(
+          f"of its particles, or of their lock regions at SCALE {REGION_SCALE:g} (waiting "
+          f"events), with every event known from the start or seen only once its creator "
+          f"finished; clash steps and clashes as above")
+    print(f"  {'domains':>7s} {'sync ns':>8s} {'waits by':>10s} {'waiting events':>15s} "
+          f"{'events are':>11s} {'1 thread ms':>12s} {f'{threads} threads':>10s} "
+          f"{'clash steps':>12s} {'clashes/step':>13s}")
+    for (dk, sync, by, seen), (seq, span, nw, ne, bad, nc) in sorted(
             pool(trace, cps, cut, syncs, domains, threads).items()):
-        print(f"  {dk:7d} {sync * 1e9:8.0f} {nw / ne:15.1%} {'seen' if seen else 'known':>11s} "
-              f"{seq / k * 1e3:12.2f} {seq / span:9.2f}x {bad:8.0f}/{k} {nc / k:13.0f}")
+        print(f"  {dk:7d} {sync * 1e9:8.0f} {by:>10s} {nw / ne:15.1%} "
+              f"{'seen' if seen else 'known':>11s} {seq / k * 1e3:12.2f} {seq / span:9.2f}x "
+              f"{bad:8.0f}/{k} {nc / k:13.0f}")
 
 
 def main():

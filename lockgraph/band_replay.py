@@ -43,14 +43,17 @@ queues: a domain then runs its earliest event that exists, and waits only for
 neighbours' events that exist (``order_conflicts`` counts what that let
 through).  Two hops suffice for the sequential order: two events that share a
 particle, one writing it, have particles within two hops of each other (an
-event writes its own particles and reads their candidates).
+event writes its own particles and reads their candidates).  An engine that
+knows only lock regions waits by region instead (``region_waits``: the
+domains within two lock-graph hops of the event's regions): coarser, so
+more events wait.
 """
 import heapq
 
 import numpy as np
 
 __all__ = ["particle_levels", "event_domains", "band_schedule", "order_conflicts",
-           "domain_masks", "event_waits", "creators", "pool_schedule"]
+           "domain_masks", "region_waits", "event_waits", "creators", "pool_schedule"]
 
 # domains a wait mask (uint64) can name
 MAX_DOMAINS = 64
@@ -282,21 +285,51 @@ def domain_masks(noff, nent, domain, levels):
 
     noff, nent: the step's candidate lists (CSR); domain: (N,) ints < 64.
     """
-    noff = np.asarray(noff, np.int64)
-    nent = np.asarray(nent, np.int64)
-    domain = np.asarray(domain, np.int64)
+    domain = _check_domains(domain)
     n = domain.shape[0]
-    if noff.shape != (n + 1,) or nent.shape[0] != noff[-1]:
+    noff = np.asarray(noff, np.int64)
+    if noff.shape != (n + 1,):
         raise ValueError(f"noff must have shape ({n + 1},) and nent noff[-1] entries")
-    if n and not 0 <= domain.min() <= domain.max() < MAX_DOMAINS:
+    return _spread(noff, nent, np.left_shift(np.uint64(1), domain.astype(np.uint64)), levels)
+
+
+def region_waits(ev_i, ev_j, domain, region, loff, ladj, hops=2):
+    """``event_waits`` with the waits by lock region, as an engine that knows
+    only its regions would wait: for the other domains with a particle in a
+    region within ``hops`` lock-graph hops of either particle's region.
+
+    region: (N,) the region of each particle; loff (R + 1,), ladj: the lock
+    graph (CSR)."""
+    domain = _check_domains(domain)
+    region = np.asarray(region, np.int64)
+    loff = np.asarray(loff, np.int64)
+    if region.shape != domain.shape or (region.size and not 0 <= region.min() <= region.max()
+                                        < loff.shape[0] - 1):
+        raise ValueError("region must give each particle a region of the lock graph")
+    own = np.zeros(loff.shape[0] - 1, np.uint64)
+    np.bitwise_or.at(own, region, np.left_shift(np.uint64(1), domain.astype(np.uint64)))
+    return event_waits(ev_i, ev_j, domain, _spread(loff, ladj, own, hops)[region])
+
+
+def _check_domains(domain):
+    domain = np.asarray(domain, np.int64)
+    if domain.size and not 0 <= domain.min() <= domain.max() < MAX_DOMAINS:
         raise ValueError(f"domains must be 0..{MAX_DOMAINS - 1}")
-    if levels < 0:
-        raise ValueError(f"levels must be >= 0, got {levels}")
-    owner = np.repeat(np.arange(n), np.diff(noff))
-    mask = np.left_shift(np.uint64(1), domain.astype(np.uint64))
-    for _ in range(levels):
+    return domain
+
+
+def _spread(off, ent, mask, hops):
+    """mask OR-ed over ``hops`` hops of the graph (CSR off, ent)."""
+    off = np.asarray(off, np.int64)
+    ent = np.asarray(ent, np.int64)
+    if ent.shape[0] != off[-1]:
+        raise ValueError("the graph's entries must number its offsets' last")
+    if hops < 0:
+        raise ValueError(f"levels must be >= 0, got {hops}")
+    owner = np.repeat(np.arange(off.shape[0] - 1), np.diff(off))
+    for _ in range(hops):
         grown = mask.copy()
-        np.bitwise_or.at(grown, owner, mask[nent])
+        np.bitwise_or.at(grown, owner, mask[ent])
         mask = grown
     return mask
 

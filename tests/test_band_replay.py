@@ -5,8 +5,9 @@ from collections import deque
 import numpy as np
 import pytest
 
-from lockgraph.band_replay import (band_schedule, creators, domain_masks, event_domains, event_waits,
-                                   order_conflicts, particle_levels, pool_schedule)
+from lockgraph.band_replay import (band_schedule, creators, domain_masks, event_domains,
+                                   event_waits, order_conflicts, particle_levels, pool_schedule,
+                                   region_waits)
 
 from .helpers import symmetric_csr
 
@@ -274,6 +275,35 @@ class TestPoolSchedule:
         domain = rng.integers(0, 5, n)
         np.testing.assert_array_equal(domain_masks(noff, nent, domain, levels),
                                       bfs_masks(adj, domain, levels))
+
+    @pytest.mark.parametrize("seed", range(4))
+    def test_region_waits_against_bfs(self, seed):
+        """The domains with a particle in a region within two region hops of
+        either particle's region; particles as their own regions give the
+        particle waits."""
+        rng = np.random.default_rng(seed)
+        n, r = 60, 12
+        domain = rng.integers(0, 4, n)
+        region = rng.integers(0, r, n)
+        radj, loff, ladj = random_lists(rng, r, 15)
+        ev_i = rng.integers(0, n, 30)
+        ev_j = np.where(rng.random(30) < 0.7, rng.integers(0, n, 30), -1)
+        edom, wait = region_waits(ev_i, ev_j, domain, region, loff, ladj)
+        near = bfs_masks(radj, list(range(r)), 2)  # bit x: region x within two hops
+        for e in range(30):
+            regs = {int(region[ev_i[e]])} | ({int(region[ev_j[e]])} if ev_j[e] >= 0 else set())
+            want = 0
+            for p in range(n):
+                if any((int(near[x]) >> int(region[p])) & 1 for x in regs) and \
+                        domain[p] != domain[ev_i[e]]:
+                    want |= 1 << int(domain[p])
+            assert edom[e] == domain[ev_i[e]] and int(wait[e]) == want
+        _, noff, nent = random_lists(rng, n, 70)
+        np.testing.assert_array_equal(
+            region_waits(ev_i, ev_j, domain, np.arange(n), noff, nent)[1],
+            event_waits(ev_i, ev_j, domain, domain_masks(noff, nent, domain, 2))[1])
+        with pytest.raises(ValueError, match="region"):
+            region_waits(ev_i, ev_j, domain, np.full(n, r), loff, ladj)
 
     def test_event_waits_and_creators(self):
         masks = np.array([0b01, 0b11, 0b110, 0b100], np.uint64)
