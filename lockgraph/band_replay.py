@@ -102,10 +102,11 @@ def band_schedule(ev_domain, band, cost, runahead=False, sync=0.0, finish=False,
     ev_domain: (E,) domain of each event, band: (E,) bool, cost: (E,) seconds,
     all in key (trace) order.  Returns (makespan, per-domain busy seconds),
     and with ``finish`` also each event's finish and start times (E,) each
-    (the start as scheduled: the finish less the cost need not round back to it).  ``ahead``
-    (E,) bool, with ``runahead``: the events that may run ahead of a waiting
-    band event (free ones only; default all free events); the other free
-    events keep their place in key order among the band events.
+    (the start as scheduled: the finish less the cost need not round back to
+    it, and an order check needs it exactly).  ``ahead`` (E,) bool, with
+    ``runahead``: the events that may run ahead of a waiting band event (free
+    ones only; default all free events); the other free events keep their
+    place in key order among the band events.
     """
     ev_domain = np.asarray(ev_domain, np.int64)
     band = np.asarray(band, bool)
@@ -325,7 +326,7 @@ def _spread(off, ent, mask, hops):
     if ent.shape[0] != off[-1]:
         raise ValueError("the graph's entries must number its offsets' last")
     if hops < 0:
-        raise ValueError(f"levels must be >= 0, got {hops}")
+        raise ValueError(f"levels (hops) must be >= 0, got {hops}")
     owner = np.repeat(np.arange(off.shape[0] - 1), np.diff(off))
     for _ in range(hops):
         grown = mask.copy()
