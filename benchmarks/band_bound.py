@@ -27,7 +27,9 @@ theirs with a smaller key is pending or running; a thread whose domains wait
 takes another.  ``known``: every event is known from the start (the bound);
 ``seen``: an event exists only once the event that last wrote one of its
 particles has finished, as in an engine that reads its neighbours' queues
-(with the events then run against the sequential order, ``clashes``).  Also
+(with the events then run against the sequential order, ``clashes``); with
+the domains free to go to any thread, or thread k keeping domains k, k + T,
+... (``d mod T``).  Also
 with the waits by lock region (``regions``: the domains within two hops of
 the event's regions in the lock graph at SCALE 4, as an engine that knows
 only regions would wait; ``band_replay.region_waits``).
@@ -127,7 +129,7 @@ def ran_ahead(edom, band, start):
 
 
 def pool(trace, cps, cut, syncs, domains, threads):
-    """The pool's rows: (domains, sync, waits by, known/seen) -> summed
+    """The pool's rows: (domains, sync, waits by, known/seen, fixed) -> summed
     (1-thread cost, makespan, waiting events, events, clash steps, clashes)."""
     rows = {}
     for ev, slot, noff, nent, (region, loff, ladj) in trace:
@@ -143,12 +145,13 @@ def pool(trace, cps, cut, syncs, domains, threads):
             for sync in syncs:
                 # (the events seen only once created: by particles; they waited
                 # as if known in every run tried)
-                for by, seen in (("particles", False), ("particles", True), ("regions", False)):
+                for by, seen, fixed in (("particles", False, False), ("particles", True, False),
+                                        ("particles", False, True), ("regions", False, False)):
                     edom, wait = waits[by]
                     span, start, fin = pool_schedule(edom, wait, cost, threads,
-                                                     made if seen else None, sync)
+                                                     made if seen else None, sync, fixed)
                     nc = order_conflicts(si, sj, ev["kind"], noff, nent, start, fin)
-                    r = rows.setdefault((k, sync, by, seen), np.zeros(6))
+                    r = rows.setdefault((k, sync, by, seen, fixed), np.zeros(6))
                     r += [cost.sum(), span, np.count_nonzero(wait), len(cost), nc > 0, nc]
     return rows
 
@@ -201,13 +204,13 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domai
           f"events), with every event known from the start or seen only once its creator "
           f"finished; clash steps and clashes as above")
     print(f"  {'domains':>7s} {'sync ns':>8s} {'waits by':>10s} {'waiting events':>15s} "
-          f"{'events are':>11s} {'1 thread ms':>12s} {f'{threads} threads':>10s} "
-          f"{'clash steps':>12s} {'clashes/step':>13s}")
-    for (dk, sync, by, seen), (seq, span, nw, ne, bad, nc) in sorted(
+          f"{'events are':>11s} {'domains on':>11s} {'1 thread ms':>12s} "
+          f"{f'{threads} threads':>10s} {'clash steps':>12s} {'clashes/step':>13s}")
+    for (dk, sync, by, seen, fixed), (seq, span, nw, ne, bad, nc) in sorted(
             pool(trace, cps, cut, syncs, domains, threads).items()):
         print(f"  {dk:7d} {sync * 1e9:8.0f} {by:>10s} {nw / ne:15.1%} "
-              f"{'seen' if seen else 'known':>11s} {seq / k * 1e3:12.2f} {seq / span:9.2f}x "
-              f"{bad:8.0f}/{k} {nc / k:13.0f}")
+              f"{'seen' if seen else 'known':>11s} {'d mod T' if fixed else 'any':>11s} "
+              f"{seq / k * 1e3:12.2f} {seq / span:9.2f}x {bad:8.0f}/{k} {nc / k:13.0f}")
 
 
 def main():

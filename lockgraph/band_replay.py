@@ -361,9 +361,10 @@ def creators(ev_i, ev_j, ev_kind):
     return out
 
 
-def pool_schedule(ev_domain, wait, cost, threads, creator=None, sync=0.0):
+def pool_schedule(ev_domain, wait, cost, threads, creator=None, sync=0.0, fixed=False):
     """(makespan, start (E,), finish (E,)) of the events on ``threads``
-    virtual threads shared by the domains.
+    virtual threads shared by the domains (with ``fixed``, thread k runs
+    only domains k, k + T, ...).
 
     ev_domain: (E,) domain of each event, wait: (E,) uint64 mask of the
     domains it waits for, cost: (E,) seconds (plus ``sync`` when it waits
@@ -423,33 +424,37 @@ def pool_schedule(ev_domain, wait, cost, threads, creator=None, sync=0.0):
         return True
 
     t = 0.0
-    free = threads
+    idle = list(range(threads))
     heap = []
     left = e_all
     while left:
-        while free:
-            best_d, best_e = -1, -1
-            for d in range(ndom):
-                if running[d]:
-                    continue
-                e = next_of(d, t)
-                if e >= 0 and (best_e < 0 or e < best_e) and may_start(e, d, t):
-                    best_d, best_e = d, e
+        while idle:
+            # the least-key event that may start on an idle thread (any one,
+            # unless fixed: then the thread its domain belongs to)
+            best_k, best_d, best_e = -1, -1, -1
+            for k in (idle if fixed else idle[:1]):
+                for d in range(k if fixed else 0, ndom, threads if fixed else 1):
+                    if running[d]:
+                        continue
+                    e = next_of(d, t)
+                    if e >= 0 and (best_e < 0 or e < best_e) and may_start(e, d, t):
+                        best_k, best_d, best_e = k, d, e
             if best_e < 0:
                 break
             sta[best_e] = t
             fin[best_e] = t + cost[best_e]
             started[best_e] = True
             running[best_d] = True
-            free -= 1
+            idle.remove(best_k)
             left -= 1
-            heapq.heappush(heap, (fin[best_e], best_d))
+            heapq.heappush(heap, (fin[best_e], best_d, best_k))
         if not heap:
             raise RuntimeError("pool_schedule: no event can start")
-        t, d = heapq.heappop(heap)
+        t, d, k = heapq.heappop(heap)
         running[d] = False
-        free += 1
+        idle.append(k)
         while heap and heap[0][0] <= t:
-            running[heapq.heappop(heap)[1]] = False
-            free += 1
+            _, d, k = heapq.heappop(heap)
+            running[d] = False
+            idle.append(k)
     return (float(fin.max()) if e_all else 0.0), sta, fin

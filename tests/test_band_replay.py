@@ -234,10 +234,11 @@ def random_trace(rng, adj, e_all):
     return np.array(ev_i), np.array(ev_j), np.array(kind)
 
 
-def tick_pool(dom, wait, cost, threads, cr):
+def tick_pool(dom, wait, cost, threads, cr, fixed=False):
     """Oracle for integer costs: every time unit the free threads take, one
     at a time, the least-key event that the pool rule lets start, with
-    everything re-derived from the finish times so far."""
+    everything re-derived from the finish times so far (fixed: domain d only
+    on thread d mod T)."""
     e_all = len(cost)
     fin = [None] * e_all
     tau = 0
@@ -251,6 +252,8 @@ def tick_pool(dom, wait, cost, threads, cr):
     while None in fin:
         while sum(f is not None and f > tau for f in fin) < threads:
             busy = {dom[x] for x in range(e_all) if fin[x] is not None and fin[x] > tau}
+            if fixed:  # a busy thread's other domains wait too
+                busy = {d for d in set(dom) if any(d % threads == b % threads for b in busy)}
             picks = []
             for d in set(dom) - busy:
                 pend = [x for x in range(e_all) if dom[x] == d and fin[x] is None and exists(x)]
@@ -339,6 +342,10 @@ class TestPoolSchedule:
         everyone = np.array([0b1110, 0b1101, 0b1011, 0b0111], np.uint64)
         np.testing.assert_array_equal(pool_schedule(dom, everyone, [3.0, 1.0, 1.0, 1.0], 2)[1],
                                       [0, 3, 4, 5])
+        # fixed threads: e2 (domain 2) must wait for thread 0, busy with e0
+        # until 3; then e3 (thread 1) runs 4-5
+        np.testing.assert_array_equal(
+            pool_schedule(dom, wait, [3.0, 1.0, 1.0, 1.0], 2, fixed=True)[1], [0, 0, 3, 4])
 
     def test_created_late_is_not_waited_for(self):
         # e2 (domain 0) waits for domain 1, whose only event e1 is created by
@@ -361,10 +368,13 @@ class TestPoolSchedule:
         cost = rng.integers(1, 5, len(ev_i))
         threads = int(rng.integers(1, 4))
         for cr in (np.full(len(ev_i), -1), creators(ev_i, ev_j, kind)):
-            span, start, _ = pool_schedule(edom, wait, cost.astype(float), threads, creator=cr)
-            want_span, want_start = tick_pool(list(edom), wait, list(cost), threads, list(cr))
-            assert span == want_span
-            np.testing.assert_array_equal(start, want_start)
+            for fixed in (False, True):
+                span, start, _ = pool_schedule(edom, wait, cost.astype(float), threads,
+                                               creator=cr, fixed=fixed)
+                want_span, want_start = tick_pool(list(edom), wait, list(cost), threads,
+                                                  list(cr), fixed)
+                assert span == want_span
+                np.testing.assert_array_equal(start, want_start)
 
     def test_two_hops_keep_the_order(self):
         """With every event known in advance, waits for the domains within two
