@@ -29,8 +29,7 @@ takes another.  ``known``: every event is known from the start (the bound);
 particles has finished, as in an engine that reads its neighbours' queues
 (with the events then run against the sequential order, ``clashes``); with
 the domains free to go to any thread, or thread k keeping domains k, k + T,
-... (``d mod T``).  Also
-with the waits by lock region (``regions``: the domains within two hops of
+... (``d mod T``).  Also with the waits by lock region (``regions``: the domains within two hops of
 the event's regions in the lock graph at SCALE 4, as an engine that knows
 only regions would wait; ``band_replay.region_waits``).
 
@@ -128,14 +127,18 @@ def ran_ahead(edom, band, start):
     return n
 
 
+def in_slots(ev, slot, cps):
+    """A step's events as (slot of i, slot of j or -1, cost in seconds)."""
+    sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
+    return slot[ev["i"]], sj, ev["cycles"] / cps
+
+
 def pool(trace, cps, cut, syncs, domains, threads):
     """The pool's rows: (domains, sync, waits by, known/seen, fixed) -> summed
     (1-thread cost, makespan, waiting events, events, clash steps, clashes)."""
     rows = {}
     for ev, slot, noff, nent, (region, loff, ladj) in trace:
-        si = slot[ev["i"]]
-        sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
-        cost = ev["cycles"] / cps
+        si, sj, cost = in_slots(ev, slot, cps)
         made = creators(si, sj, ev["kind"])
         for k in domains:
             dom = cut_domains(slot.shape[0], si, sj, cost, cut, k)
@@ -160,9 +163,7 @@ def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domai
     trace, cps = record(name, n, steps, bed_code, bed_steps)
     rows = {}
     for ev, slot, noff, nent, _ in trace:
-        si = slot[ev["i"]]
-        sj = np.where(ev["j"] >= 0, slot[np.maximum(ev["j"], 0)], -1)
-        cost = ev["cycles"] / cps
+        si, sj, cost = in_slots(ev, slot, cps)
         dom = cut_domains(slot.shape[0], si, sj, cost, cut)
         for lv in levels:
             lvl = particle_levels(noff, nent, dom, lv + max(depths, default=0))

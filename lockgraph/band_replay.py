@@ -52,6 +52,8 @@ import heapq
 
 import numpy as np
 
+from .replay import _dependencies
+
 __all__ = ["particle_levels", "event_domains", "band_schedule", "order_conflicts",
            "domain_masks", "region_waits", "event_waits", "creators", "pool_schedule"]
 
@@ -349,16 +351,18 @@ def creators(ev_i, ev_j, ev_kind):
     """(E,) for each event the latest earlier event that wrote one of its
     particles (a pair collision, kind 0, writes i and j; the others i), -1
     for none: the event that predicted it (or one before; -1: the step's
-    first predictions)."""
-    last = {}
-    out = np.full(len(ev_i), -1, np.int64)
-    for e, (i, j, k) in enumerate(zip(np.asarray(ev_i).tolist(), np.asarray(ev_j).tolist(),
-                                      np.asarray(ev_kind).tolist())):
-        out[e] = max(last.get(i, -1), last.get(j, -1) if j >= 0 else -1)
-        last[i] = e
-        if k == 0 and j >= 0:
-            last[j] = e
-    return out
+    first predictions).  The later of its two parents under ``replay``'s
+    "writers" rule."""
+    ev_i = np.ascontiguousarray(ev_i, np.int64)
+    ev_j = np.ascontiguousarray(ev_j, np.int64)
+    m = ev_i.shape[0]
+    if m == 0:
+        return np.zeros(0, np.int64)
+    parents = np.zeros((m, 2), np.int64)
+    _dependencies(ev_i, ev_j, np.ascontiguousarray(ev_kind, np.int64), False,
+                  np.zeros(int(max(ev_i.max(), ev_j.max())) + 1, np.int64), parents,
+                  np.zeros(m, np.int64), np.zeros(m + 1, np.int64), np.zeros(2 * m, np.int64))
+    return parents.max(axis=1)
 
 
 def pool_schedule(ev_domain, wait, cost, threads, creator=None, sync=0.0, fixed=False):
