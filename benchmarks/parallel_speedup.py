@@ -2,7 +2,7 @@
 
     python benchmarks/parallel_speedup.py [--quick] [--cases ring,dish_marble]
                                           [--n ring=200000] [--steps 5] [--repeats 3]
-                                          [--locks graph:4,grid,graph:4:auto]
+                                          [--locks graph:4,grid,graph:4:auto,pool:8]
                                           [--out results.json]
                                           [--bed-code lammps] [--bed-steps 100]
 
@@ -93,16 +93,20 @@ def say(msg):
 
 
 def parse_locks(text):
-    """[(kind, scale, merge_far, schedule)] from 'graph:4,graph:4:unmerged,graph:4:auto,grid'
-    (auto: ``schedule="auto"``, a step's events on one thread when that measured
-    faster)."""
+    """[(kind, scale, merge_far, schedule)] from
+    'graph:4,graph:4:unmerged,graph:4:auto,grid,pool:8' (auto: ``schedule="auto"``,
+    a step's events on one thread when that measured faster; pool:K:
+    ``schedule="pool"`` with K domains, the scale slot holding K)."""
     out = []
     for item in text.split(","):
         kind, _, rest = item.partition(":")
         scale, _, flag = rest.partition(":")
+        if kind == "pool" and not flag:
+            out.append(("pool", float(scale) if scale else 8.0, True, "pool"))
+            continue
         if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged", "auto"):
-            raise SystemExit(f"--locks: unknown lock {item!r} "
-                             "(graph:SCALE, graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d)")
+            raise SystemExit(f"--locks: unknown lock {item!r} (graph:SCALE, "
+                             "graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d, pool:K)")
         out.append((kind, float(scale) if scale else 4.0, flag != "unmerged",
                     "auto" if flag == "auto" else "parallel"))
     return out
@@ -204,6 +208,11 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     sc = load_case(name, n, bed_code, bed_steps)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
+        if schedule == "pool":  # K domains shared by the two threads
+            label = f"2 threads pool {int(scale)} domains"
+            engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool")
+            engines[label].pool_domains = int(scale)
+            continue
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
             "" if merge else " unmerged") + (" auto" if schedule == "auto" else "")
         engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, lock=kind,
@@ -278,9 +287,9 @@ def main():
     add_case_options(ap, "ring,dish_marble,dish")
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto",
-                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, ... "
-                         "(graph:1.2,graph:4,graph:16,grid,graph:4:auto)")
+    ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8",
+                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K, ... "
+                         "(graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8)")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()
     locks = parse_locks(args.locks)

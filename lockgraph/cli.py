@@ -3,7 +3,7 @@
     lockgraph scenes
     lockgraph run SCENE [--state early|late] [--n N] [--steps K] [--dt DT] [--seed S]
                         [--threads T] [--lock none|grid|graph] [--scale X]
-                        [--policy exact|paper] [--schedule parallel|auto]
+                        [--policy exact|paper] [--schedule parallel|auto|pool]
                         [--param KEY=VALUE ...]
                         [--save FILE.npz] [--json] [--quiet]
 
@@ -316,8 +316,10 @@ def parser():
     r.add_argument("--scale", type=float, default=4.0, help="lock-graph SCALE")
     r.add_argument("--policy", default="exact", help="exact | paper")
     r.add_argument("--schedule", default="parallel",
-                   help="parallel | auto: threads > 1, a step's events on the worker threads "
-                        "always, or (exact policy) on one thread when that measured faster")
+                   help="parallel | auto | pool: threads > 1, a step's events on the worker "
+                        "threads always, or (exact policy) on one thread when that measured "
+                        "faster, or (exact policy) on 4 domains a thread that any free thread "
+                        "takes, waiting by particle")
     r.add_argument("--param", action="append", metavar="KEY=VALUE",
                    help="override a scene parameter (repeatable)")
     r.add_argument("--save", metavar="FILE.npz", help="write the final state (pos, vel, radius, "

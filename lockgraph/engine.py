@@ -25,6 +25,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
+from .pool import MAX_DOMAINS, NPCTL, PHIGH, pool_state
 from .parallel import (INTERIOR, Workers, cache_aligned, classify_ranges, classify_regions,
                        cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
@@ -42,7 +43,7 @@ from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bou
 LOCKS = ("none", "grid", "grid3d", "graph")
 NO_SLEEP = np.zeros(0)  # _finish's sleep states without sleeping grains (read only)
 POLICIES = ("exact", "paper")
-SCHEDULES = ("parallel", "auto")
+SCHEDULES = ("parallel", "auto", "pool")
 # tasks per thread in the claimed phases (Engine.balance, _claimed)
 BALANCE = 4
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
@@ -119,7 +120,10 @@ class Engine:
         always on the worker threads, or (exact policy only) on the worker
         threads or the calling thread alone, whichever measured faster lately
         (``schedule.EventSchedule``; the result is the same bit for bit).  The
-        other phases of a step run on all threads either way.
+        other phases of a step run on all threads either way.  "pool" (exact
+        policy): ``pool_domains`` domains (4 a thread by default) that any free
+        thread takes, events waiting by particle (``lockgraph/pool.py``);
+        ``lock`` and ``scale`` are not used.
     window_events : float — how far an interior event may run ahead of the
         other threads' domains, in units of a domain's mean time between events.
     stall_seconds : float — a step in which no thread completes an event for
@@ -173,6 +177,9 @@ class Engine:
         if schedule == "auto" and policy != "exact":
             raise InputError("schedule", "'auto' runs some steps' events on one thread, which "
                              "gives the threads' result only under policy 'exact'")
+        if schedule == "pool" and policy != "exact":
+            raise InputError("schedule", "'pool' waits by particle and repairs what it cannot "
+                             "order: it has no 'paper' policy")
         if threads > 1 and lock == "none":
             raise InputError("lock", "threads > 1 need lock regions: 'grid', 'grid3d' or 'graph'")
         self.threads = int(threads)
@@ -184,6 +191,8 @@ class Engine:
         # exact policy, lock graph: regions far from the other domains are merged
         # (``_far_domains``); an attribute, not an option, so benchmarks can compare
         self.merge_far = True
+        # schedule "pool": domains shared by the threads (an attribute, like merge_far)
+        self.pool_domains = 4 * self.threads
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
@@ -597,19 +606,23 @@ class Engine:
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
                 K.init_queue(parts, evq)
             else:
-                # each thread: its domain's first events, then the domain's queue
-                dlo, dhi = self._domains()
+                # each domain's first events, then the domain's queue
+                nd = self._pool_count() if self.schedule == "pool" else self.threads
+                dlo, dhi = self._domains(nd)
                 q = tournament_size(int((dhi - dlo).max()))
-                dtour_t = cache_aligned((self.threads, 2 * q), np.float64, np.inf)
-                dtour_s = cache_aligned((self.threads, 2 * q), np.int32, -1)
-                rows = cache_aligned((self.threads, K.NSTAT))
+                dtour_t = cache_aligned((nd, 2 * q), np.float64, np.inf)
+                dtour_s = cache_aligned((nd, 2 * q), np.int32, -1)
+                rows = cache_aligned((nd, K.NSTAT))
                 self._pmap(K.init_range, [(parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
                                            dtour_t[d], dtour_s[d])
-                                          for d in range(self.threads)])
+                                          for d in range(nd)])
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
             try:
                 if sequential:
                     status = self._events_sequential(st, img_pos, img_vel, full, half)
+                elif self.schedule == "pool":
+                    status = self._events_pool(st, img_pos, img_vel, full,
+                                               (dlo, dhi, dtour_t, dtour_s))
                 else:
                     status = self._events_parallel(st, img_pos, img_vel, half, full,
                                                    (dlo, dhi, dtour_t, dtour_s))
@@ -629,6 +642,11 @@ class Engine:
             bad_id = int(self.ids[bad]) if 0 <= bad < self.n else -1
             self._rollback()
             self.ctr[K.LCOUNT] = log_start
+            if (status != K.POOL_OVERFLOW and not sequential and self.policy == "exact"
+                    and st[K.S_VIOL] + st[K.S_REACHOUT] > 0):
+                # a violation was seen: whatever else stopped the attempt may have
+                # come from reading out of order; the repair decides
+                status = K.VIOLATION
             if status == K.POOL_OVERFLOW:
                 self._grow_pool()
                 continue  # redo the step with a larger pool: same result
@@ -790,6 +808,47 @@ class Engine:
         dhi = np.array([r[1] for r in ranges], np.int64)
         return dlo, dhi
 
+    def _pool_count(self):
+        """The pool's domains: ``pool_domains`` rounded down to a power of two
+        (tree nodes of one depth), at most ``pool.MAX_DOMAINS`` and N."""
+        k = max(1, min(int(self.pool_domains), MAX_DOMAINS, self.n))
+        return 1 << (k.bit_length() - 1)
+
+    def _events_pool(self, st, img_pos, img_vel, full, queues):
+        """The step's events under ``schedule="pool"`` (``lockgraph/pool.py``):
+        the domains' masks, then the threads until done."""
+        dlo, dhi, dtour_t, dtour_s = queues
+        pst, locks = pool_state(self.noff, self.nent, dlo, dhi, self.n, self._pmap,
+                                self.threads)
+        nd = len(dlo)
+        pctl = cache_aligned((nd, NPCTL), np.int64)
+        pctl[:, PHIGH] = -1
+        per_domain = max(self.last_events / nd, 1.0)
+        window = self.workers.window_events * self.dt / per_domain
+        stt = cache_aligned((self.threads, K.NSTAT))
+        wall0 = self.workers.wall_s
+        try:
+            while True:
+                bundles = self._bundles(img_pos, img_vel, full)
+                status = self.workers.run_pool(bundles, stt, locks, pst, queues, pctl, window)
+                if status in (K.NEED_JOURNAL, K.NEED_LOG):
+                    self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
+                    continue
+                return status
+        finally:
+            self._add_rows(st, stt)
+            st[K.S_ECYC] += (self.workers.wall_s - wall0) * cycles_per_second()
+
+    @staticmethod
+    def _add_rows(st, stt):
+        """Add the threads' statistics rows to st (maxima where they are maxima)."""
+        for row in stt:
+            m = max(st[K.S_MAXOV], row[K.S_MAXOV])
+            c = max(st[K.S_MAXCIS], row[K.S_MAXCIS])
+            st += row
+            st[K.S_MAXOV] = m
+            st[K.S_MAXCIS] = c
+
     def _events_parallel(self, st, img_pos, img_vel, half, full, queues):
         """The step's events on the worker threads.  ``queues = (dlo, dhi,
         dtour_t, dtour_s)``: the domains' slot ranges and their queues (built
@@ -831,12 +890,7 @@ class Engine:
                     continue
                 return status
         finally:
-            for row in stt:
-                m = max(st[K.S_MAXOV], row[K.S_MAXOV])
-                c = max(st[K.S_MAXCIS], row[K.S_MAXCIS])
-                st += row
-                st[K.S_MAXOV] = m
-                st[K.S_MAXCIS] = c
+            self._add_rows(st, stt)
             st[K.S_ECYC] += (self.workers.wall_s - wall0) * cycles_per_second()
 
     @property

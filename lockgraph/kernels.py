@@ -47,7 +47,7 @@ from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, update_queue_pair, build_queue
 from .atomics import cycles, fetch_add, fetch_max, float_bits
-from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
+from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair, has_entry
 from .predict import (INF, cylinder_time, cylinder_time_by, floor_time, floor_time_by,
                       pair_time, pair_time_by)
 from .restitution import coefficient
@@ -324,8 +324,11 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
                 if m == k and img == SELF_IMAGE:
                     continue
                 if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
-                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m):
+                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m) and \
+                            not has_entry(noff, nent, xhead, xent, xnext, k, (m << 5) | img):
                         # beyond the lock design: regions thought independent now interact
+                        # (a pair already listed was allowed for: the pool's regions
+                        # do not list every candidate's region as adjacent)
                         st[S_REACHOUT] += 1
                         if ipar[I_PAPER] == 0:
                             ctr[CTR_BAD] = k

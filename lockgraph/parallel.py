@@ -59,6 +59,7 @@ from .neighbors import LCOUNT
 
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
+NOWAIT = 18  # tests: nonzero makes the pool's events run without waiting (only its checks order them)
 NCTRL = 24
 # per-domain row of dctl: the lock, the clock (read by the other threads at
 # every boundary event) and what only termination and stall checks read (in
@@ -604,6 +605,7 @@ class Workers:
         self.dctl = np.zeros(threads * NDCTL, np.int64)
         self.fault = None  # tests: a thread that raises (d) or never works (("stall", d))
         self.jitter = 0  # tests: a nonzero seed makes the workers pause at random
+        self.no_wait = False  # tests: pool events do not wait (the checks must catch it all)
         self.stacks = None  # per-thread search stacks (rows), sized on first use
         self.wall_s = 0.0
         self.inline_last = True  # map: the caller runs the last task (False: benchmarks compare)
@@ -748,6 +750,56 @@ class Workers:
         finally:
             self.wall_s += time.perf_counter() - t0
         return int(self.ctrl[STATUS])
+
+    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window):
+        """``schedule="pool"``: run ``pool.pool_worker`` on every thread until the
+        step's events are done or one stops with a status; returns that status.
+        ``pctl`` (domains x ``pool.NPCTL``, cache-aligned) keeps each domain's
+        latest event time across calls within a step (a call after a grown
+        journal resumes the step); its clocks and owners are set here."""
+        from .pool import NTCTL, PCLOCK, PHIGH, PINFL, POWNER
+
+        self.ctrl[:] = 0
+        self.ctrl[JITTER] = self.jitter
+        self.ctrl[NOWAIT] = int(self.no_wait)
+        dlo, dhi, dtour_t, dtour_s = doms
+        pc = pctl.reshape(-1)
+        npc = pctl.shape[1]
+        for d in range(len(dlo)):
+            t = dtour_t[d][1] if dtour_s[d][1] >= 0 else np.inf
+            row = pctl[d]
+            row[:PHIGH] = 0
+            row[PCLOCK] = np.float64(t).view(np.int64)
+            row[PINFL] = np.float64(np.inf).view(np.int64)
+            row[POWNER] = -1
+        tctl = cache_aligned((self.threads * NTCTL,), np.int64)
+        work = bundles[1][3]
+        if self.stacks is None or self.stacks.shape[1] != work.shape[0]:
+            self.stacks = np.zeros((self.threads, work.shape[0]), work.dtype)
+        assert npc * 8 % 64 == 0
+        t0 = time.perf_counter()
+        try:
+            self.map(self._one_pool, [(k, bundles, stt, locks, pst, doms, pc, tctl, window)
+                                      for k in range(self.threads)])
+        finally:
+            self.wall_s += time.perf_counter() - t0
+        return int(self.ctrl[STATUS])
+
+    def _one_pool(self, k, bundles, stt, locks, pst, doms, pc, tctl, window):
+        from .pool import hold_until_abort, pool_worker
+
+        try:
+            if self.fault == k:
+                raise RuntimeError(f"injected fault in worker thread {k}")
+            if self.fault == ("stall", k):  # takes domain 0 and never lets go
+                return hold_until_abort(pc, self.ctrl)
+            parts, step, tree, nbrs, evq, jour, cfg = bundles
+            step = step[:3] + (self.stacks[k],)
+            return pool_worker(k, self.threads, parts, step, tree, nbrs, evq, jour, cfg, stt[k],
+                               locks, pst, doms, self.ctrl, pc, tctl, window, self.stall_cycles)
+        except BaseException:
+            self.ctrl[ABORT] = 1
+            raise
 
     def _one(self, d, bundles, stt, locks, lstate, doms, window):
         try:

@@ -111,9 +111,12 @@ class Simulation:
     policy : "exact" | "paper" — exact (default): causality violations are
         detected and repaired, so any thread count gives the sequential result
         bit for bit; paper: the paper's rule, violations only counted.
-    schedule : "parallel" | "auto" — threads > 1: a step's events always on the
-        worker threads, or (exact policy) on them or on one thread, whichever
-        measured faster lately; same result bit for bit (see ``Engine``).
+    schedule : "parallel" | "auto" | "pool" — threads > 1: a step's events always
+        on the worker threads, or (exact policy) on them or on one thread,
+        whichever measured faster lately, or (exact policy) on more domains
+        than threads that any free thread takes, waiting by particle
+        (``lockgraph/pool.py``; ``lock`` and ``scale`` are then not used); same
+        result bit for bit (see ``Engine``).
     window_events : float — how far ahead of the other threads an interior event
         may run (see ``Engine``).
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).

@@ -1,0 +1,192 @@
+"""``schedule="pool"``: more domains than threads, waiting by particle, checked.
+
+The same guarantee as the threaded engine's (``test_parallel.py``): the final
+state is the sequential engine's bit for bit and every particle has the same
+collision sequence — on every scene, early and late, with 2, 4 and 8 domains on
+2 threads and 4 domains on 3; with random pauses in the workers; on random
+scenes.  With waiting switched off the checks alone must catch every event
+run out of order (each such step repaired).  The two-hop masks are checked
+against breadth-first search on random candidate graphs.
+"""
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
+
+from lockgraph import kernels as K
+from lockgraph import scenarios
+from lockgraph.domains import PeriodicCube
+from lockgraph.engine import Engine
+from lockgraph.errors import InputError, SimulationError
+from lockgraph.physics import Physics
+from lockgraph.pool import domain_of_slots, hop_masks, pool_regions
+from lockgraph.restitution import Constant
+from lockgraph.simulation import Simulation
+
+from .test_parallel import SMALL, STEPS, random_gas, run, sequential, steps_match  # noqa: F401
+
+
+def pool_engine(sc, domains, threads=2, **opts):
+    eng = Engine(sc.state, sc.physics, sc.dt, record_events=True, leaf_size=4, threads=threads,
+                 schedule="pool", **opts)
+    eng.pool_domains = domains
+    return eng
+
+
+@pytest.mark.parametrize("domains,threads", [(2, 2), (4, 2), (8, 2), (4, 3)])
+@pytest.mark.parametrize("which", ["early", "late"])
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_pool_equals_sequential(sequential, name, which, domains, threads):
+    sc, want_hash, want_seq = sequential(name, which)
+    assert len(want_seq) > 20
+    steps_match(pool_engine(sc, domains, threads), STEPS[name], want_hash, want_seq)
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_pool_random_pauses_change_nothing(sequential, name):
+    """Workers pausing at random (one event in eight, up to 2^16 cycles) hold
+    domains while others run on: still the sequential result."""
+    sc, want_hash, want_seq = sequential(name, "early")
+    for seed in (3, 5):
+        eng = pool_engine(sc, 4)
+        eng.workers.jitter = seed
+        steps_match(eng, STEPS[name], want_hash, want_seq)
+
+
+@pytest.mark.parametrize("name", ["dish_marble", "ring_moonlet"])
+def test_without_waiting_the_checks_catch_every_disorder(sequential, name):
+    """Fault injection: events that run without waiting for the domains near
+    them run out of time order; the particle checks must find every case (the
+    state stays the sequential one) and each such step is repaired."""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = pool_engine(sc, 8)
+    eng.workers.no_wait = True
+    eng.workers.jitter = 7
+    try:
+        steps_match(eng, STEPS[name], want_hash, want_seq)
+    finally:
+        repairs = eng.repairs
+        viol = eng.totals[K.S_VIOL] + eng.totals[K.S_REACHOUT]
+    assert repairs > 0
+    assert viol >= repairs
+
+
+@settings(max_examples=25, deadline=None)
+@given(hs.integers(20, 90), hs.integers(0, 10 ** 6), hs.floats(0.0, 3.0),
+       hs.sampled_from([2, 4, 8, 16]), hs.sampled_from([2, 3]), hs.floats(0.3, 1.0))
+def test_pool_random_scenes_exact(n, seed, spread, domains, threads, e):
+    st = random_gas(n, seed, spread)
+    ph = Physics(PeriodicCube(12.0), (), Constant(e))
+    seq = Engine(st, ph, 0.05)
+    par = Engine(st, ph, 0.05, threads=threads, schedule="pool")
+    par.pool_domains = domains
+    try:
+        for _ in range(6):
+            seq.step()
+            par.step()
+        assert par.state().sha256() == seq.state().sha256()
+    finally:
+        par.close()
+
+
+def random_csr(n, m, rng):
+    """A random symmetric candidate graph in the engine's CSR layout."""
+    a = rng.integers(0, n, m)
+    b = rng.integers(0, n, m)
+    keep = a != b
+    a, b = a[keep], b[keep]
+    rows = [[] for _ in range(n)]
+    for x, y in zip(a, b):
+        rows[x].append((int(y) << 5) | 13)
+        rows[y].append((int(x) << 5) | 13)
+    noff = np.zeros(n + 1, np.int64)
+    noff[1:] = np.cumsum([len(r) for r in rows])
+    nent = np.array([e for r in rows for e in r], np.int32)
+    return noff, nent, rows
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hop_masks_match_breadth_first_search(seed):
+    """h2[s] holds exactly the domains within two candidate hops of s; a slot
+    is its domain's "region" for ``grow`` exactly when that is its own alone."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 80))
+    noff, nent, rows = random_csr(n, int(rng.integers(0, 2 * n)), rng)
+    k = int(rng.integers(1, 9))
+    cuts = np.sort(rng.integers(0, n + 1, k - 1))
+    dlo = np.concatenate([[0], cuts]).astype(np.int64)
+    dhi = np.concatenate([cuts, [n]]).astype(np.int64)
+    sdom = np.empty(n, np.int64)
+    domain_of_slots(dlo, dhi, sdom)
+    h1 = np.empty(n, np.int64)
+    h2 = np.empty(n, np.int64)
+    hop_masks(noff, nent, sdom, h1, h1, 0, n, True)
+    hop_masks(noff, nent, sdom, h1, h2, 0, n, False)
+    lock_of = np.empty(n, np.int32)
+    pool_regions(sdom, h2, lock_of, 0, n)
+    for s in range(n):
+        dist = {s: 0}
+        frontier = [s]
+        for hop in (1, 2):
+            nxt = []
+            for u in frontier:
+                for e in rows[u]:
+                    v = e >> 5
+                    if v not in dist:
+                        dist[v] = hop
+                        nxt.append(v)
+            frontier = nxt
+        want = 0
+        for v in dist:
+            want |= 1 << int(sdom[v])
+        assert h2[s] == want
+        assert (lock_of[s] == sdom[s]) == (want == 1 << int(sdom[s]))
+        if lock_of[s] != sdom[s]:
+            assert lock_of[s] == 64 + s
+
+
+def test_pool_stall_is_an_error_not_a_hang():
+    """A thread that takes a domain and never lets go: the other thread, which
+    could run every other domain, stalls on it and says so; the state is
+    left at the last completed step."""
+    cfg = SMALL["dish"]
+    sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool", stall_seconds=0.5)
+    eng.pool_domains = 2
+    try:
+        for _ in range(25):
+            eng.step()
+        before = eng.state()
+        eng.workers.fault = ("stall", 0)
+        t0 = time.perf_counter()
+        with pytest.raises(SimulationError, match="stalled"):
+            eng.step()
+        assert time.perf_counter() - t0 < 30.0
+        assert eng.state().sha256() == before.sha256()
+    finally:
+        eng.close()
+
+
+def test_pool_statistics_and_options():
+    """The pool's statistics reach the simulation; its options are checked."""
+    sc = scenarios.load("dish_marble", "late", n=SMALL["dish_marble"]["n"],
+                        params=SMALL["dish_marble"]["params"])
+    sim = Simulation(sc.state, sc.physics, sc.dt, threads=2, schedule="pool")
+    seq = Engine(sc.state, sc.physics, sc.dt)
+    try:
+        sim.run(5)
+        for _ in range(5):
+            seq.step()
+        assert sim.state.sha256() == seq.state().sha256()
+        stats = sim.stats
+        assert stats["events"] > 0
+        assert stats["mean_concurrency"] > 0
+    finally:
+        sim.close()
+        seq.close()
+    st = random_gas(20, 1, 0.0)
+    ph = Physics(PeriodicCube(12.0), (), Constant(1.0))
+    with pytest.raises(InputError, match="^schedule: 'pool' .* no 'paper' policy"):
+        Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
