@@ -193,6 +193,7 @@ class Engine:
         self.merge_far = True
         # schedule "pool": domains shared by the threads (an attribute, like merge_far)
         self.pool_domains = 4 * self.threads
+        self.pool_checked_steps = 0  # pool steps made checked by a pair found mid-step
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
@@ -308,7 +309,8 @@ class Engine:
         self.logi = np.zeros((lcap, 3), np.int64)
         self.log_steps = []  # (step index, first log entry) per step
         self.par = np.zeros(K.NPAR)
-        self.no_locks = (np.zeros(0, np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32))
+        self.no_locks = (np.zeros(0, np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32),
+                         np.zeros((2, 0), np.int64))
         self.ipar = np.zeros(K.NIPAR, np.int64)
         self._encode()
 
@@ -821,7 +823,7 @@ class Engine:
         pst, locks = pool_state(self.noff, self.nent, dlo, dhi, self.n, self._pmap,
                                 self.threads)
         nd = len(dlo)
-        pctl = cache_aligned((nd, NPCTL), np.int64)
+        pctl = cache_aligned((nd + 1, NPCTL), np.int64)  # and the step's row (PCHECKED)
         pctl[:, PHIGH] = -1
         per_domain = max(self.last_events / nd, 1.0)
         window = self.workers.window_events * self.dt / per_domain
@@ -836,6 +838,7 @@ class Engine:
                     continue
                 return status
         finally:
+            self.pool_checked_steps += int(pctl[nd, 0] != 0)
             self._add_rows(st, stt)
             st[K.S_ECYC] += (self.workers.wall_s - wall0) * cycles_per_second()
 
@@ -858,7 +861,7 @@ class Engine:
         regions = self.build_locks(img_pos, half, domains=(dlo, dhi, full) if merge else None)
         if merge:  # the next step's margin
             self._fine_hop = regions.info["fine_hop"]
-        locks = (regions.lock_of, regions.loff, regions.ladj)
+        locks = (regions.lock_of, regions.loff, regions.ladj, np.zeros((2, 0), np.int64))
         r = regions.count
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
         dom = np.zeros(r, np.int64)

@@ -26,9 +26,13 @@ which is the tree order of the current step):
   every resolved collision, seen from particle a.
 * ``cfg = (par, ipar, img_pos, img_vel, img_all, parb)`` — step constants
   (``parb`` is an int64 view of ``par``, for the atomic P_RMAX).
-* ``locks = (lock_of, loff, ladj)`` — the step's lock regions (empty arrays
-  when running sequentially); a widened reach that brings together particles
-  of non-adjacent regions is a violation of the lock design.
+* ``locks = (lock_of, loff, ladj, hops)`` — the step's lock regions (empty
+  arrays when running sequentially); a widened reach that brings together
+  particles of non-adjacent regions is a violation of the lock design.  The
+  pool schedule has no regions: ``lock_of`` is each slot's domain and
+  ``hops`` (2, N) int64 its one- and two-hop domain masks (``pool``); the
+  rule for a new pair is then ``pool``'s (``regions_adjacent``).  ``hops``
+  is (2, 0) otherwise.
 * ``st`` (NSTAT,) float64 — statistics of the step (one row per thread); its
   slots ``S_JNEXT`` / ``S_JEND`` hold the calling thread's journal block (not
   statistics: the engine clears them).
@@ -47,7 +51,7 @@ from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, update_queue_pair, build_queue
 from .atomics import cycles, fetch_add, fetch_max, float_bits
-from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair, has_entry
+from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
 from .predict import (INF, cylinder_time, cylinder_time_by, floor_time, floor_time_by,
                       pair_time, pair_time_by)
 from .restitution import coefficient
@@ -236,8 +240,17 @@ def log_event(jour, ctr, t, a, b, img):
 
 @kernel(inline=True)
 def regions_adjacent(locks, a, b):
-    """Are the lock regions of slots a and b the same or adjacent?"""
-    lock_of, loff, ladj = locks
+    """Are the lock regions of slots a and b the same or adjacent?  With
+    domain masks (the pool): may a and b become candidates without changing
+    any mask?  Each one's domain is already one hop from the other, and each
+    one's one-hop set is already within the other's two hops — so every
+    event's wait set (two hops) still covers what it reads and writes."""
+    lock_of, loff, ladj, hops = locks
+    if hops.shape[1] > 0:
+        h1a = hops[0, a]
+        h1b = hops[0, b]
+        return ((h1a >> lock_of[b]) & 1) != 0 and ((h1b >> lock_of[a]) & 1) != 0 and \
+            (h1b & ~hops[1, a]) == 0 and (h1a & ~hops[1, b]) == 0
     la = lock_of[a]
     lb = lock_of[b]
     if la == lb:
@@ -324,13 +337,12 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
                 if m == k and img == SELF_IMAGE:
                     continue
                 if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
-                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m) and \
-                            not has_entry(noff, nent, xhead, xent, xnext, k, (m << 5) | img):
+                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m):
                         # beyond the lock design: regions thought independent now interact
-                        # (a pair already listed was allowed for: the pool's regions
-                        # do not list every candidate's region as adjacent)
                         st[S_REACHOUT] += 1
-                        if ipar[I_PAPER] == 0:
+                        # the pool carries on: its worker settles the other domains
+                        # and checks every event from here on (``pool``)
+                        if ipar[I_PAPER] == 0 and locks[3].shape[1] == 0:
                             ctr[CTR_BAD] = k
                             return VIOLATION
                     added = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)

@@ -326,7 +326,7 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
     dtb = float_bits(dt)
     paper = ipar[I_PAPER] != 0
     far = not paper
-    lock_of, loff, ladj = locks
+    lock_of, loff, ladj, _ = locks
     ts, held, near = lstate
     dom, bd, dlo, dhi, dtour_t, dtour_s = doms
     ndom = dlo.shape[0]
@@ -757,7 +757,7 @@ class Workers:
         ``pctl`` (domains x ``pool.NPCTL``, cache-aligned) keeps each domain's
         latest event time across calls within a step (a call after a grown
         journal resumes the step); its clocks and owners are set here."""
-        from .pool import NTCTL, PCLOCK, PHIGH, PINFL, POWNER
+        from .pool import NTCTL, PCLOCK, PHIGH, PINFL, POWNER, PSETTLE
 
         self.ctrl[:] = 0
         self.ctrl[JITTER] = self.jitter
@@ -772,6 +772,9 @@ class Workers:
             row[PCLOCK] = np.float64(t).view(np.int64)
             row[PINFL] = np.float64(np.inf).view(np.int64)
             row[POWNER] = -1
+            row[PSETTLE] = 0
+        if isinstance(self.fault, tuple) and self.fault[0] == "stall":
+            pctl[0, POWNER] = 1 << 20  # taken before any worker can (hold_until_abort)
         tctl = cache_aligned((self.threads * NTCTL,), np.int64)
         work = bundles[1][3]
         if self.stacks is None or self.stacks.shape[1] != work.shape[0]:

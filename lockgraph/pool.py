@@ -35,11 +35,20 @@ ordering of the two checks across threads is by full fences: an event that
 is not interior publishes its ``wt`` with an atomic maximum before it reads any
 particle, and the checking commit runs under its domain's lock.
 
-**Candidates found mid-step.**  A widened reach that adds a pair (k, m) keeps
-the masks valid only when both particles' two-hop neighbourhoods lie inside
-one domain: ``pool_regions`` gives such slots their domain as their "lock
-region" and every other slot a region of its own with no neighbours, so
-``kernels.grow`` reports any other new pair as a violation (REACHOUT).
+**Candidates found mid-step.**  A widened reach that adds a pair (k, m)
+leaves the masks true when m's domain is already in ``h1[k]`` and k's in
+``h1[m]`` (so neither one-hop set grows), and ``h1[m]`` is within ``h2[k]``,
+``h1[k]`` within ``h2[m]`` (so no two-hop set grows): ``kernels.grow`` is
+given the masks (``locks = (sdom, -, -, (h1, h2))``) and tests that rule.  Any
+other new pair (a few dozen a step on a dense bed, most of them between
+particles several hops apart at the step start, so wider masks do not help)
+makes the rest of the step *checked*: the event that found it marks the step
+(``PCHECKED``), waits until every event already in flight elsewhere has
+committed (``_settle``: each of those then sees the mark at its commit and
+checks, or has published its particle times for this one's check), and from
+then on no event is interior — every one publishes its times with a fence and
+checks at its commit.  Waiting stays by the old masks, so disorder becomes
+likelier, but it is caught.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner and progress; on a fourth its latest event time) and ``tctl``
@@ -51,8 +60,9 @@ from ._jit import kernel
 from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits, load,
                       sched_yield, sleep_us, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
-from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC, S_VIOL,
-                      S_WAIT, STALL, VIOLATION, journal_room, process_event)
+from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
+                      S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, journal_room,
+                      process_event)
 from .neighbors import LCOUNT
 from .parallel import ABORT, JITTER, NOWAIT, PARK_AFTER, PARK_US, _fail, _pause
 from .predict import INF
@@ -61,8 +71,11 @@ MAX_DOMAINS = 63  # bits of an int64 mask
 # per-domain row of dctl (four cache lines): its lock; its clock and the time of
 # its event in flight (INF when none), read together; owner and progress; the
 # latest event time it ran
-PLOCK, PCLOCK, PINFL, POWNER, PPROG, PHIGH = 0, 8, 9, 16, 17, 24
+PLOCK, PCLOCK, PINFL, POWNER, PPROG, PHIGH, PSETTLE = 0, 8, 9, 16, 17, 24, 25
 NPCTL = 32
+# one row more after the domains' rows: nonzero once a pair found mid-step broke
+# the masks (the step is then *checked*: every event fenced and checked)
+PCHECKED = 0
 NTCTL = 8  # per-thread row of tctl: in flight
 
 
@@ -85,20 +98,6 @@ def hop_masks(noff, nent, sdom, src, dst, lo, hi, first):
             q = nent[k] >> 5
             m |= (np.int64(1) << sdom[q]) if first else src[q]
         dst[s] = m
-
-
-@kernel
-def pool_regions(sdom, h2, lock_of, lo, hi):
-    """``grow``'s view of the pool: slots whose two hops lie in their own domain
-    get that domain as their region, every other slot a region of its own
-    (K + s) without neighbours, so a new pair is allowed only inside one
-    domain's deep interior."""
-    k = 64
-    for s in range(lo, hi):
-        if h2[s] == (np.int64(1) << sdom[s]):
-            lock_of[s] = sdom[s]
-        else:
-            lock_of[s] = k + s
 
 
 @kernel(inline=True)
@@ -203,6 +202,29 @@ def _done(dctl, tctl, ndom, nthr, dtb):
 
 
 @kernel(inline=True)
+def _settle(dctl, ctrl, d, ndom, stall_cycles):
+    """Mark the step checked, then wait until every other domain's event in
+    flight has committed (its progress moved), or none is, or it is settling
+    too.  STALL if that takes longer than the stall limit; ABORT ends it."""
+    store(dctl, ndom * NPCTL + PCHECKED, 1)
+    store(dctl, d * NPCTL + PSETTLE, 1)
+    inf = float_bits(INF)
+    for e in range(ndom):
+        if e == d:
+            continue
+        p0 = load(dctl, e * NPCTL + PPROG)
+        t0 = cycles()
+        while load(dctl, e * NPCTL + PINFL) != inf and load(dctl, e * NPCTL + PPROG) == p0 \
+                and load(dctl, e * NPCTL + PSETTLE) == 0:
+            if load(ctrl, ABORT) != 0:
+                return OK
+            if cycles() - t0 > stall_cycles:
+                return STALL
+            cpu_relax()
+    return OK
+
+
+@kernel(inline=True)
 def _publish_pool(dctl, d, tour_t, tour_s):
     t = tour_t[1] if tour_s[1] >= 0 else INF
     store(dctl, d * NPCTL + PCLOCK, float_bits(t))
@@ -232,6 +254,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     nblk = 0
     wait_from = 0
     checked = 0
+    strict = False
     seen = -1
     rng = load(ctrl, JITTER) * (2 * me + 1)
     nowait = load(ctrl, NOWAIT) != 0
@@ -285,10 +308,11 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             if j >= 0:
                 w |= h2[j]
             w &= ~(np.int64(1) << d)
+            strict = load(dctl, ndom * NPCTL + PCHECKED) != 0
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)
             late = tb <= dctl[d * NPCTL + PHIGH]
-            if w == 0:
+            if w == 0 and not strict:
                 if t > oclock + window:
                     oclock = bits_float(_others_clock(dctl, d, ndom))
                     blocked = t > oclock + window
@@ -348,7 +372,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         if rng != 0:
             rng = _pause(rng)
         c0 = cycles()
-        check = w != 0 or late
+        check = w != 0 or late or strict
+        r0 = st[S_REACHOUT]
         if evt[i] != t or evp[i] != p:
             # i's event changed since it was read: another thread wrote i
             st[S_VIOL] += 1
@@ -358,6 +383,14 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             status, jw = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st,
                                        locks)
         st[S_CONC] += cycles() - c0
+        if status == OK and st[S_REACHOUT] > r0:
+            # a pair found by this event broke the masks: from now on the step is
+            # checked, and this event commits once every event that began before
+            # that is known has committed (or is settling too): so each of them
+            # checks at its commit, or has published its times for this one's
+            check = True
+            st[S_REACHOUT] = r0  # not a violation here (the engine counts checked steps)
+            status = _settle(dctl, ctrl, d, ndom, stall_cycles)
         st[S_CLAIMS] += 1
         if rng != 0:
             rng = _pause(rng)
@@ -369,7 +402,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         spin_lock(dctl, a * NPCTL + PLOCK)
         if b != a:
             spin_lock(dctl, b * NPCTL + PLOCK)
-        if status == OK and check:
+        if status == OK and (check or load(dctl, ndom * NPCTL + PCHECKED) != 0):
             if _later_near(wt, noff, nent, xhead, xent, xnext, i, tb) or (
                     j >= 0 and _later_near(wt, noff, nent, xhead, xent, xnext, j, tb)):
                 st[S_VIOL] += 1
@@ -388,6 +421,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             _publish_pool(dctl, e, dtour_t[e], dtour_s[e])
         _publish_pool(dctl, d, dtour_t[d], dtour_s[d])
         store(dctl, d * NPCTL + PINFL, float_bits(INF))
+        store(dctl, d * NPCTL + PSETTLE, 0)
         if tb > dctl[d * NPCTL + PHIGH]:
             dctl[d * NPCTL + PHIGH] = tb
         if b != a:
@@ -401,12 +435,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
 
 @kernel
 def hold_until_abort(dctl, ctrl):
-    """Tests: a thread that claims domain 0 and never runs or releases it,
-    so the others can only stall — and must say so."""
-    while cas(dctl, POWNER, -1, 1 << 20) != -1:
-        if load(ctrl, ABORT) != 0:
-            return OK
-        cpu_relax()
+    """Tests: the thread holding domain 0 (taken for it before the workers
+    start: ``Workers.run_pool``) never runs or releases it, so the others
+    can only stall — and must say so."""
     while load(ctrl, ABORT) == 0:
         sched_yield()
     store(dctl, POWNER, -1)
@@ -414,20 +445,20 @@ def hold_until_abort(dctl, ctrl):
 
 
 def pool_state(noff, nent, dlo, dhi, n, pmap, threads):
-    """Per-slot arrays of a pool step: (h2, wt, sdom) and ``grow``'s regions
-    ``(lock_of, loff, ladj)``, the masks built on the threads."""
+    """Per-slot arrays of a pool step: (h2, wt, sdom) and ``grow``'s view
+    ``(sdom, -, -, (h1, h2))``, the masks built on the threads."""
     sdom = np.empty(n, np.int64)
     domain_of_slots(dlo, dhi, sdom)
-    h1 = np.empty(n, np.int64)
-    h2 = np.empty(n, np.int64)
-    lock_of = np.empty(n, np.int32)
+    hops = np.empty((2, n), np.int64)
+    h1, h2 = hops[0], hops[1]
     cuts = [n * k // threads for k in range(threads + 1)]
     pmap(hop_masks, [(noff, nent, sdom, h1, h1, cuts[k], cuts[k + 1], True)
                      for k in range(threads)])
     pmap(hop_masks, [(noff, nent, sdom, h1, h2, cuts[k], cuts[k + 1], False)
                      for k in range(threads)])
-    pmap(pool_regions, [(sdom, h2, lock_of, cuts[k], cuts[k + 1]) for k in range(threads)])
     wt = np.full(n, -1, np.int64)
-    nreg = 64 + n
-    locks = (lock_of, np.zeros(nreg + 1, np.int64), np.zeros(0, np.int32))
+    import os
+    if os.environ.get("LG_LOOSE"):
+        hops = np.full((2, n), -1, np.int64)
+    locks = (sdom.astype(np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
     return (h2, wt, sdom), locks

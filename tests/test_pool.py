@@ -21,7 +21,8 @@ from lockgraph.domains import PeriodicCube
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError, SimulationError
 from lockgraph.physics import Physics
-from lockgraph.pool import domain_of_slots, hop_masks, pool_regions
+from lockgraph.kernels import regions_adjacent
+from lockgraph.pool import domain_of_slots, hop_masks
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 
@@ -55,11 +56,14 @@ def test_pool_random_pauses_change_nothing(sequential, name):
         steps_match(eng, STEPS[name], want_hash, want_seq)
 
 
-@pytest.mark.parametrize("name", ["dish_marble", "ring_moonlet"])
+@pytest.mark.parametrize("name", ["dish", "dish_marble"])
 def test_without_waiting_the_checks_catch_every_disorder(sequential, name):
     """Fault injection: events that run without waiting for the domains near
     them run out of time order; the particle checks must find every case (the
-    state stays the sequential one) and each such step is repaired."""
+    state stays the sequential one) and each such step is repaired.  On the
+    dense dish scenes every step has such disorder (measured: 20 of 20 steps
+    repaired in 8 runs each); the small ring scenes have too few events near
+    the domain borders for any (0 in 8 runs), so they are not used here."""
     sc, want_hash, want_seq = sequential(name, "late")
     eng = pool_engine(sc, 8)
     eng.workers.no_wait = True
@@ -71,6 +75,16 @@ def test_without_waiting_the_checks_catch_every_disorder(sequential, name):
         viol = eng.totals[K.S_VIOL] + eng.totals[K.S_REACHOUT]
     assert repairs > 0
     assert viol >= repairs
+
+
+def test_pairs_that_break_the_masks_make_the_step_checked(sequential):
+    """The marble's late steps find new candidate pairs between particles whose
+    domains the masks did not join (measured: 16 of 20 steps); those steps carry
+    on checked, not repaired, and the result is still the sequential one."""
+    sc, want_hash, want_seq = sequential("dish_marble", "late")
+    eng = pool_engine(sc, 8)
+    steps_match(eng, STEPS["dish_marble"], want_hash, want_seq)
+    assert eng.pool_checked_steps > eng.repairs
 
 
 @settings(max_examples=25, deadline=None)
@@ -109,8 +123,9 @@ def random_csr(n, m, rng):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_hop_masks_match_breadth_first_search(seed):
-    """h2[s] holds exactly the domains within two candidate hops of s; a slot
-    is its domain's "region" for ``grow`` exactly when that is its own alone."""
+    """h1[s] and h2[s] hold exactly the domains within one and two candidate
+    hops of s; ``grow``'s rule allows a new pair (a, b) exactly when adding it
+    leaves every slot's one- and two-hop sets unchanged (recomputed by BFS)."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(5, 80))
     noff, nent, rows = random_csr(n, int(rng.integers(0, 2 * n)), rng)
@@ -120,31 +135,41 @@ def test_hop_masks_match_breadth_first_search(seed):
     dhi = np.concatenate([cuts, [n]]).astype(np.int64)
     sdom = np.empty(n, np.int64)
     domain_of_slots(dlo, dhi, sdom)
-    h1 = np.empty(n, np.int64)
-    h2 = np.empty(n, np.int64)
-    hop_masks(noff, nent, sdom, h1, h1, 0, n, True)
-    hop_masks(noff, nent, sdom, h1, h2, 0, n, False)
-    lock_of = np.empty(n, np.int32)
-    pool_regions(sdom, h2, lock_of, 0, n)
-    for s in range(n):
-        dist = {s: 0}
-        frontier = [s]
-        for hop in (1, 2):
-            nxt = []
-            for u in frontier:
-                for e in rows[u]:
-                    v = e >> 5
-                    if v not in dist:
-                        dist[v] = hop
-                        nxt.append(v)
-            frontier = nxt
-        want = 0
-        for v in dist:
-            want |= 1 << int(sdom[v])
-        assert h2[s] == want
-        assert (lock_of[s] == sdom[s]) == (want == 1 << int(sdom[s]))
-        if lock_of[s] != sdom[s]:
-            assert lock_of[s] == 64 + s
+    hops = np.empty((2, n), np.int64)
+    hop_masks(noff, nent, sdom, hops[0], hops[0], 0, n, True)
+    hop_masks(noff, nent, sdom, hops[0], hops[1], 0, n, False)
+    assert [masks_by_bfs(rows, sdom, s) for s in range(n)] == list(zip(hops[0], hops[1]))
+    locks = (sdom.astype(np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
+    for _ in range(40):
+        a, b = (int(x) for x in rng.integers(0, n, 2))
+        if a == b:
+            continue
+        grown = [list(r) for r in rows]
+        grown[a].append((b << 5) | 13)
+        grown[b].append((a << 5) | 13)
+        same = all(masks_by_bfs(grown, sdom, s) == masks_by_bfs(rows, sdom, s)
+                   for s in range(n))
+        assert regions_adjacent(locks, a, b) == same, (a, b)
+
+
+def masks_by_bfs(rows, sdom, s):
+    """(one-hop, two-hop) domain masks of slot s by breadth-first search."""
+    out = []
+    seen = {s}
+    frontier = [s]
+    for _ in (1, 2):
+        nxt = []
+        for u in frontier:
+            for e in rows[u]:
+                if e >> 5 not in seen:
+                    seen.add(e >> 5)
+                    nxt.append(e >> 5)
+        frontier = nxt
+        m = 0
+        for v in seen:
+            m |= 1 << int(sdom[v])
+        out.append(m)
+    return tuple(out)
 
 
 def test_pool_stall_is_an_error_not_a_hang():
