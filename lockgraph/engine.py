@@ -310,7 +310,7 @@ class Engine:
         self.log_steps = []  # (step index, first log entry) per step
         self.par = np.zeros(K.NPAR)
         self.no_locks = (np.zeros(0, np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32),
-                         np.zeros((2, 0), np.int64))
+                         np.zeros((4, 0), np.int64))
         self.ipar = np.zeros(K.NIPAR, np.int64)
         self._encode()
 
@@ -861,7 +861,7 @@ class Engine:
         regions = self.build_locks(img_pos, half, domains=(dlo, dhi, full) if merge else None)
         if merge:  # the next step's margin
             self._fine_hop = regions.info["fine_hop"]
-        locks = (regions.lock_of, regions.loff, regions.ladj, np.zeros((2, 0), np.int64))
+        locks = (regions.lock_of, regions.loff, regions.ladj, np.zeros((4, 0), np.int64))
         r = regions.count
         lstate = (np.zeros(r, np.int64), np.zeros(r, np.int64), np.zeros(r, np.int64))
         dom = np.zeros(r, np.int64)

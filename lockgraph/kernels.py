@@ -30,9 +30,9 @@ which is the tree order of the current step):
   arrays when running sequentially); a widened reach that brings together
   particles of non-adjacent regions is a violation of the lock design.  The
   pool schedule has no regions: ``lock_of`` is each slot's domain and
-  ``hops`` (2, N) int64 its one- and two-hop domain masks (``pool``); the
-  rule for a new pair is then ``pool``'s (``regions_adjacent``).  ``hops``
-  is (2, 0) otherwise.
+  ``hops`` (4, N) int64 its one- and two-hop domain masks and its checked and
+  exposed marks (``pool``); the rule for a new pair is then ``pool``'s
+  (``regions_adjacent``).  ``hops`` is (4, 0) otherwise.
 * ``st`` (NSTAT,) float64 — statistics of the step (one row per thread); its
   slots ``S_JNEXT`` / ``S_JEND`` hold the calling thread's journal block (not
   statistics: the engine clears them).
@@ -261,6 +261,25 @@ def regions_adjacent(locks, a, b):
     return False
 
 
+@kernel(inline=True)
+def expose_pair(noff, nent, xhead, xent, xnext, hops, k, m):
+    """The pool (``pool``): a pair (k, m) outside the masks.  k and m become
+    *exposed* (``hops[3]``: written by events the masks do not order) and they
+    and every particle that reads them, their candidates, *checked*
+    (``hops[2]``: their events publish their times with a fence and check)."""
+    hops[3, k] = 1
+    hops[3, m] = 1
+    for u in range(2):
+        s = k if u == 0 else np.int64(m)
+        hops[2, s] = 1
+        for q in range(noff[s], noff[s + 1]):
+            hops[2, nent[q] >> 5] = 1
+        x = xhead[s]
+        while x >= 0:
+            hops[2, xent[x] >> 5] = 1
+            x = xnext[x]
+
+
 # grow's test without square roots: a relative margin far above their rounding,
 # used only where the room left inside the bound is not itself a rounding residue
 GROW_MARGIN = 1.0 + 1e-9
@@ -337,14 +356,20 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
                 if m == k and img == SELF_IMAGE:
                     continue
                 if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
+                    hops = locks[3]
                     if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m):
                         # beyond the lock design: regions thought independent now interact
                         st[S_REACHOUT] += 1
-                        # the pool carries on: its worker settles the other domains
-                        # and checks every event from here on (``pool``)
-                        if ipar[I_PAPER] == 0 and locks[3].shape[1] == 0:
+                        if hops.shape[1] > 0:
+                            # the pool carries on: what the pair exposes is checked
+                            # from now on (and its worker settles the other domains)
+                            expose_pair(noff, nent, xhead, xent, xnext, hops, k, m)
+                        elif ipar[I_PAPER] == 0:
                             ctr[CTR_BAD] = k
                             return VIOLATION
+                    elif hops.shape[1] > 0 and (hops[3, k] != 0 or hops[3, m] != 0):
+                        hops[2, k] = 1  # a new reader of an exposed particle
+                        hops[2, m] = 1
                     added = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
                     if added < 0:
                         return POOL_OVERFLOW

@@ -39,16 +39,19 @@ particle, and the checking commit runs under its domain's lock.
 leaves the masks true when m's domain is already in ``h1[k]`` and k's in
 ``h1[m]`` (so neither one-hop set grows), and ``h1[m]`` is within ``h2[k]``,
 ``h1[k]`` within ``h2[m]`` (so no two-hop set grows): ``kernels.grow`` is
-given the masks (``locks = (sdom, -, -, (h1, h2))``) and tests that rule.  Any
+given the masks (``locks = (sdom, -, -, (h1, h2, checked, exposed))``) and
+tests that rule.  Any
 other new pair (a few dozen a step on a dense bed, most of them between
 particles several hops apart at the step start, so wider masks do not help)
-makes the rest of the step *checked*: the event that found it marks the step
-(``PCHECKED``), waits until every event already in flight elsewhere has
-committed (``_settle``: each of those then sees the mark at its commit and
-checks, or has published its particle times for this one's check), and from
-then on no event is interior — every one publishes its times with a fence and
-checks at its commit.  Waiting stays by the old masks, so disorder becomes
-likelier, but it is caught.
+is let in but *exposes* k and m (``kernels.expose_pair``): events ordered by
+no mask may now write them.  From then on every event on k, m or a particle
+that reads them (their candidates, and any found later) is *checked*: it
+publishes its particle times with a fence and checks at its commit, interior
+or not.  The event that found the pair then waits until every event already
+in flight elsewhere has committed (``_settle``: each of those reads the marks
+again at its commit, and has published its times before this one checks).
+Waiting stays by the old masks, so disorder becomes likelier there, but it is
+caught.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner and progress; on a fourth its latest event time) and ``tctl``
@@ -74,7 +77,7 @@ MAX_DOMAINS = 63  # bits of an int64 mask
 PLOCK, PCLOCK, PINFL, POWNER, PPROG, PHIGH, PSETTLE = 0, 8, 9, 16, 17, 24, 25
 NPCTL = 32
 # one row more after the domains' rows: nonzero once a pair found mid-step broke
-# the masks (the step is then *checked*: every event fenced and checked)
+# the masks (counted by the engine: ``Engine.pool_checked_steps``)
 PCHECKED = 0
 NTCTL = 8  # per-thread row of tctl: in flight
 
@@ -203,9 +206,10 @@ def _done(dctl, tctl, ndom, nthr, dtb):
 
 @kernel(inline=True)
 def _settle(dctl, ctrl, d, ndom, stall_cycles):
-    """Mark the step checked, then wait until every other domain's event in
-    flight has committed (its progress moved), or none is, or it is settling
-    too.  STALL if that takes longer than the stall limit; ABORT ends it."""
+    """After a pair that broke the masks: note it on the step's row, then wait
+    until every other domain's event in flight has committed (its progress
+    moved), or none is, or it is settling too.  STALL if that takes longer
+    than the stall limit; ABORT ends it."""
     store(dctl, ndom * NPCTL + PCHECKED, 1)
     store(dctl, d * NPCTL + PSETTLE, 1)
     inf = float_bits(INF)
@@ -234,8 +238,9 @@ def _publish_pool(dctl, d, tour_t, tour_s):
 def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, pst, doms, ctrl,
                 dctl, tctl, window, stall_cycles):
     """Thread ``me`` of ``nthr``: claims domains and runs their events until the
-    step is done.  ``pst = (h2, wt, sdom)``: per slot, the two-hop domain mask,
-    the latest event time on it (float bits, -1 before any) and its domain;
+    step is done.  ``pst = (h2, wt, sdom, checked)``: per slot, the two-hop
+    domain mask, the latest event time on it (float bits, -1 before any), its
+    domain and its checked mark (``kernels.expose_pair``);
     ``doms = (dlo, dhi, dtour_t, dtour_s)``.  Returns its final status."""
     ids = parts[7]
     noff, nent, xhead, xent, xnext, ctr = nbrs
@@ -244,7 +249,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     logt = jour[3]
     dt = cfg[0][P_DT]
     dtb = float_bits(dt)
-    h2, wt, sdom = pst
+    h2, wt, sdom, marked = pst
     dlo, dhi, dtour_t, dtour_s = doms
     ndom = dlo.shape[0]
     cur = -1
@@ -307,8 +312,12 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             w = h2[i]
             if j >= 0:
                 w |= h2[j]
+            strict = load(marked, i) != 0 or (j >= 0 and load(marked, j) != 0)
+            if strict:
+                # near a pair the masks do not know: wait for every domain (the
+                # stale masks would let disorder through, caught but repaired)
+                w = (np.int64(1) << ndom) - 1
             w &= ~(np.int64(1) << d)
-            strict = load(dctl, ndom * NPCTL + PCHECKED) != 0
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)
             late = tb <= dctl[d * NPCTL + PHIGH]
@@ -384,10 +393,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                                        locks)
         st[S_CONC] += cycles() - c0
         if status == OK and st[S_REACHOUT] > r0:
-            # a pair found by this event broke the masks: from now on the step is
-            # checked, and this event commits once every event that began before
-            # that is known has committed (or is settling too): so each of them
-            # checks at its commit, or has published its times for this one's
+            # a pair found by this event broke the masks (``expose_pair``): this
+            # event commits once every event that began before that could see
+            # the marks has committed (or is settling too), so each of those
+            # checks by the marks at its commit, or has published its times
             check = True
             st[S_REACHOUT] = r0  # not a violation here (the engine counts checked steps)
             status = _settle(dctl, ctrl, d, ndom, stall_cycles)
@@ -402,7 +411,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         spin_lock(dctl, a * NPCTL + PLOCK)
         if b != a:
             spin_lock(dctl, b * NPCTL + PLOCK)
-        if status == OK and (check or load(dctl, ndom * NPCTL + PCHECKED) != 0):
+        if status == OK and (check or load(marked, i) != 0 or (j >= 0 and load(marked, j) != 0)):
             if _later_near(wt, noff, nent, xhead, xent, xnext, i, tb) or (
                     j >= 0 and _later_near(wt, noff, nent, xhead, xent, xnext, j, tb)):
                 st[S_VIOL] += 1
@@ -445,11 +454,12 @@ def hold_until_abort(dctl, ctrl):
 
 
 def pool_state(noff, nent, dlo, dhi, n, pmap, threads):
-    """Per-slot arrays of a pool step: (h2, wt, sdom) and ``grow``'s view
-    ``(sdom, -, -, (h1, h2))``, the masks built on the threads."""
+    """Per-slot arrays of a pool step, (h2, wt, sdom, checked), and ``grow``'s
+    view ``(sdom, -, -, (h1, h2, checked, exposed))``, the masks built on the
+    threads."""
     sdom = np.empty(n, np.int64)
     domain_of_slots(dlo, dhi, sdom)
-    hops = np.empty((2, n), np.int64)
+    hops = np.zeros((4, n), np.int64)  # h1, h2, checked, exposed (``kernels.expose_pair``)
     h1, h2 = hops[0], hops[1]
     cuts = [n * k // threads for k in range(threads + 1)]
     pmap(hop_masks, [(noff, nent, sdom, h1, h1, cuts[k], cuts[k + 1], True)
@@ -457,8 +467,5 @@ def pool_state(noff, nent, dlo, dhi, n, pmap, threads):
     pmap(hop_masks, [(noff, nent, sdom, h1, h2, cuts[k], cuts[k + 1], False)
                      for k in range(threads)])
     wt = np.full(n, -1, np.int64)
-    import os
-    if os.environ.get("LG_LOOSE"):
-        hops = np.full((2, n), -1, np.int64)
     locks = (sdom.astype(np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
-    return (h2, wt, sdom), locks
+    return (h2, wt, sdom, hops[2]), locks
