@@ -193,7 +193,8 @@ class Engine:
         self.merge_far = True
         # schedule "pool": domains shared by the threads (an attribute, like merge_far)
         self.pool_domains = 4 * self.threads
-        self.pool_checked_steps = 0  # pool steps made checked by a pair found mid-step
+        # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``)
+        self.pool_checked_steps = 0
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)

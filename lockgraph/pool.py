@@ -40,18 +40,17 @@ leaves the masks true when m's domain is already in ``h1[k]`` and k's in
 ``h1[m]`` (so neither one-hop set grows), and ``h1[m]`` is within ``h2[k]``,
 ``h1[k]`` within ``h2[m]`` (so no two-hop set grows): ``kernels.grow`` is
 given the masks (``locks = (sdom, -, -, (h1, h2, checked, exposed))``) and
-tests that rule.  Any
-other new pair (a few dozen a step on a dense bed, most of them between
-particles several hops apart at the step start, so wider masks do not help)
-is let in but *exposes* k and m (``kernels.expose_pair``): events ordered by
-no mask may now write them.  From then on every event on k, m or a particle
-that reads them (their candidates, and any found later) is *checked*: it
-publishes its particle times with a fence and checks at its commit, interior
-or not.  The event that found the pair then waits until every event already
-in flight elsewhere has committed (``_settle``: each of those reads the marks
-again at its commit, and has published its times before this one checks).
-Waiting stays by the old masks, so disorder becomes likelier there, but it is
-caught.
+tests that rule.  Any other new pair (a few dozen a step on a dense bed,
+most of them between particles several hops apart at the step start, so
+wider masks do not help) is let in but *exposes* k and m
+(``kernels.expose_pair``): events ordered by no mask may now write them.
+From then on every event on k, m or a particle that reads them (their
+candidates, and any found later) is *checked*: it waits for every other
+domain, not its masks, publishes its particle times with a fence and checks
+at its commit.  The event that found the pair then waits until every event
+already in flight elsewhere has committed (``_settle``: each of those reads
+the marks again at its commit, and has published its times before this one
+checks).
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner and progress; on a fourth its latest event time) and ``tctl``
