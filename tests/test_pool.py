@@ -62,8 +62,9 @@ def test_without_waiting_the_checks_catch_every_disorder(sequential, name):
     them run out of time order; the particle checks must find every case (the
     state stays the sequential one) and each such step is repaired.  On the
     dense dish scenes every step has such disorder (measured: 20 of 20 steps
-    repaired in 8 runs each); the small ring scenes have too few events near
-    the domain borders for any (0 in 8 runs), so they are not used here."""
+    repaired in 4 runs each); the small ring scenes have too few events near
+    the domain borders for any (0 violations in 8 runs of ring_moonlet and 2
+    of ring), so they are not used here."""
     sc, want_hash, want_seq = sequential(name, "late")
     eng = pool_engine(sc, 8)
     eng.workers.no_wait = True
