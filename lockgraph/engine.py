@@ -25,7 +25,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .pool import MAX_DOMAINS, NPCTL, PHIGH, pool_state
+from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, pool_state
 from .parallel import (INTERIOR, Workers, cache_aligned, classify_ranges, classify_regions,
                        cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
@@ -828,20 +828,12 @@ class Engine:
         pctl[:, PHIGH] = -1
         per_domain = max(self.last_events / nd, 1.0)
         window = self.workers.window_events * self.dt / per_domain
-        stt = cache_aligned((self.threads, K.NSTAT))
-        wall0 = self.workers.wall_s
         try:
-            while True:
-                bundles = self._bundles(img_pos, img_vel, full)
-                status = self.workers.run_pool(bundles, stt, locks, pst, queues, pctl, window)
-                if status in (K.NEED_JOURNAL, K.NEED_LOG):
-                    self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
-                    continue
-                return status
+            return self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
+                                    self.workers.run_pool(bundles, stt, locks, pst, queues,
+                                                          pctl, window))
         finally:
-            self.pool_checked_steps += int(pctl[nd, 0] != 0)
-            self._add_rows(st, stt)
-            st[K.S_ECYC] += (self.workers.wall_s - wall0) * cycles_per_second()
+            self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
 
     @staticmethod
     def _add_rows(st, stt):
@@ -883,12 +875,18 @@ class Engine:
         # one domain's typical gaps between events (from the last step)
         per_domain = max(self.last_events / self.threads, 1.0)
         window = self.workers.window_events * self.dt / per_domain
+        return self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
+                                self.workers.run(bundles, stt, locks, lstate, doms, window))
+
+    def _on_threads(self, st, img_pos, img_vel, full, run):
+        """Call ``run(bundles, stt)`` (the workers on the step's events) until it
+        stops for a reason other than a full journal or log (grown, then the
+        step resumes); the threads' statistics rows are added to st."""
         stt = cache_aligned((self.threads, K.NSTAT))
         wall0 = self.workers.wall_s
         try:
             while True:
-                bundles = self._bundles(img_pos, img_vel, full)
-                status = self.workers.run(bundles, stt, locks, lstate, doms, window)
+                status = run(self._bundles(img_pos, img_vel, full), stt)
                 if status in (K.NEED_JOURNAL, K.NEED_LOG):
                     self._grow_journal() if status == K.NEED_JOURNAL else self._grow_log()
                     continue

@@ -59,7 +59,7 @@ from .neighbors import LCOUNT
 
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
-NOWAIT = 18  # tests: nonzero makes the pool's events run without waiting (only its checks order them)
+NOWAIT = 18  # tests: nonzero makes pool events run without waiting (its checks alone order them)
 NCTRL = 24
 # per-domain row of dctl: the lock, the clock (read by the other threads at
 # every boundary event) and what only termination and stall checks read (in
@@ -273,12 +273,47 @@ def _domain_of(dlo, x):
 
 
 @kernel(inline=True)
-def _progress(dctl, ndom):
-    """Events completed so far by all domains."""
+def _progress(dctl, ndom, stride=NDCTL, at=DPROG):
+    """Events completed so far by all domains (each domain's count at word
+    ``at`` of its row of ``stride`` words)."""
     prog = 0
     for e in range(ndom):
-        prog += load(dctl, e * NDCTL + DPROG)
+        prog += load(dctl, e * stride + at)
     return prog
+
+
+@kernel(inline=True)
+def wait_blocked(dctl, ndom, stride, at, st, waiting, wait_from, checked, seen, nblk,
+                 stall_cycles):
+    """One wait of a thread whose pick was blocked: spin, then yield, then
+    (blocked this long: the threads it waits for may share its core — more
+    threads than free cores — sleeping lets them run) sleep.  Progress
+    (``_progress``) is looked at when a wait begins and then every eighth of
+    stall_cycles (reading it at every pick would pull the line the working
+    threads write at every event): a stall is reported after 1 to 1.125
+    stall_cycles without progress.  Returns (wait_from, checked, seen, nblk,
+    stalled); the caller's wait is then under way."""
+    now = cycles()
+    if not waiting:
+        wait_from = now
+        checked = now
+        seen = _progress(dctl, ndom, stride, at)
+    elif now - checked > stall_cycles >> 3:
+        checked = now
+        prog = _progress(dctl, ndom, stride, at)
+        if prog != seen:
+            seen = prog
+            wait_from = now
+        elif now - wait_from > stall_cycles:
+            return wait_from, checked, seen, nblk, True
+    nblk += 1
+    if nblk < PARK_AFTER:
+        cpu_relax()
+        sched_yield()
+    else:
+        sleep_us(PARK_US)
+    st[S_WAIT] += cycles() - now
+    return wait_from, checked, seen, nblk, False
 
 
 @kernel(inline=True)
@@ -414,34 +449,13 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
                 return OK
             if not empty:
                 st[S_BLOCKED] += 1
-            now = cycles()
-            # progress is looked at when a wait begins and then every eighth of
-            # stall_cycles (reading it at every pick would pull the line the
-            # working threads write at every event): a stall is reported after
-            # 1 to 1.125 stall_cycles without progress
-            if not waiting:
-                waiting = True
-                wait_from = now
-                checked = now
-                seen = _progress(dctl, ndom)
-            elif now - checked > stall_cycles >> 3:
-                checked = now
-                prog = _progress(dctl, ndom)
-                if prog != seen:
-                    seen = prog
-                    wait_from = now
-                elif now - wait_from > stall_cycles:
-                    _fail(ctrl, STALL)
-                    return STALL
-            nblk += 1
-            if nblk < PARK_AFTER:
-                cpu_relax()
-                sched_yield()
-            else:
-                # blocked this long: the threads it waits for may share its core
-                # (more threads than free cores); sleeping lets them run
-                sleep_us(PARK_US)
-            st[S_WAIT] += cycles() - now
+            wait_from, checked, seen, nblk, stalled = wait_blocked(
+                dctl, ndom, NDCTL, DPROG, st, waiting, wait_from, checked, seen, nblk,
+                stall_cycles)
+            waiting = True
+            if stalled:
+                _fail(ctrl, STALL)
+                return STALL
             continue
         waiting = False
         nblk = 0

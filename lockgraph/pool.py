@@ -60,13 +60,13 @@ import numpy as np
 
 from ._jit import kernel
 from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits, load,
-                      sched_yield, sleep_us, spin_lock, spin_unlock, store)
+                      sched_yield, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
 from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
-                      S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, journal_room,
+                      S_REACHOUT, S_VIOL, STALL, VIOLATION, journal_room,
                       process_event)
 from .neighbors import LCOUNT
-from .parallel import ABORT, JITTER, NOWAIT, PARK_AFTER, PARK_US, _fail, _pause
+from .parallel import ABORT, JITTER, NOWAIT, _fail, _pause, _progress, wait_blocked
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
@@ -173,12 +173,6 @@ def _claim(dctl, ndom, me, dtb, skip):
     return -1
 
 
-@kernel(inline=True)
-def _progress(dctl, ndom):
-    prog = 0
-    for e in range(ndom):
-        prog += load(dctl, e * NPCTL + PPROG)
-    return prog
 
 
 @kernel(inline=True)
@@ -194,13 +188,13 @@ def _done(dctl, tctl, ndom, nthr, dtb):
     """No event before the step end in any queue and none in flight (the
     progress count read on both sides of the look, so a commit that moved an
     event into a domain already looked at is seen)."""
-    p0 = _progress(dctl, ndom)
+    p0 = _progress(dctl, ndom, NPCTL, PPROG)
     for e in range(ndom):
         if load(dctl, e * NPCTL + PCLOCK) < dtb or load(dctl, e * NPCTL + PINFL) < dtb:
             return False
     if not _idle(tctl, nthr):
         return False
-    return _progress(dctl, ndom) == p0
+    return _progress(dctl, ndom, NPCTL, PPROG) == p0
 
 
 @kernel(inline=True)
@@ -351,28 +345,13 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 cur = -1
                 skip = d
         if blocked:
-            now = cycles()
-            if not waiting:
-                waiting = True
-                wait_from = now
-                checked = now
-                seen = _progress(dctl, ndom)
-            elif now - checked > stall_cycles >> 3:
-                checked = now
-                prog = _progress(dctl, ndom)
-                if prog != seen:
-                    seen = prog
-                    wait_from = now
-                elif now - wait_from > stall_cycles:
-                    _fail(ctrl, STALL)
-                    return STALL
-            nblk += 1
-            if nblk < PARK_AFTER:
-                cpu_relax()
-                sched_yield()
-            else:
-                sleep_us(PARK_US)
-            st[S_WAIT] += cycles() - now
+            wait_from, checked, seen, nblk, stalled = wait_blocked(
+                dctl, ndom, NPCTL, PPROG, st, waiting, wait_from, checked, seen, nblk,
+                stall_cycles)
+            waiting = True
+            if stalled:
+                _fail(ctrl, STALL)
+                return STALL
             continue
         waiting = False
         nblk = 0

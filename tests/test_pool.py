@@ -8,7 +8,6 @@ scenes.  With waiting switched off the checks alone must catch every event
 run out of order (each such step repaired).  The two-hop masks are checked
 against breadth-first search on random candidate graphs.
 """
-import time
 
 import numpy as np
 import pytest
@@ -19,14 +18,15 @@ from lockgraph import kernels as K
 from lockgraph import scenarios
 from lockgraph.domains import PeriodicCube
 from lockgraph.engine import Engine
-from lockgraph.errors import InputError, SimulationError
+from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import regions_adjacent
 from lockgraph.pool import domain_of_slots, hop_masks
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 
-from .test_parallel import SMALL, STEPS, random_gas, run, sequential, steps_match  # noqa: F401
+from .test_parallel import (SMALL, STEPS, random_gas, sequential,  # noqa: F401
+                            stall_is_an_error, steps_match)
 
 
 def pool_engine(sc, domains, threads=2, **opts):
@@ -181,18 +181,7 @@ def test_pool_stall_is_an_error_not_a_hang():
     sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
     eng = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool", stall_seconds=0.5)
     eng.pool_domains = 2
-    try:
-        for _ in range(25):
-            eng.step()
-        before = eng.state()
-        eng.workers.fault = ("stall", 0)
-        t0 = time.perf_counter()
-        with pytest.raises(SimulationError, match="stalled"):
-            eng.step()
-        assert time.perf_counter() - t0 < 30.0
-        assert eng.state().sha256() == before.sha256()
-    finally:
-        eng.close()
+    stall_is_an_error(eng)
 
 
 def test_pool_statistics_and_options():
