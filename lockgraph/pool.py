@@ -157,13 +157,14 @@ def _others_clock(dctl, d, ndom):
 
 
 @kernel(inline=True)
-def _claim(dctl, ndom, me, dtb, skip):
-    """Claim the free domain with the earliest clock before the step end (not
-    ``skip``); -1 if there is none or another thread took it first."""
+def _claim(dctl, ndom, me, dtb, tried):
+    """Claim the free domain with the earliest clock before the step end that
+    is not in the mask ``tried``; -1 if there is none or another thread took
+    it first."""
     best = -1
     bc = dtb
     for e in range(ndom):
-        if e != skip and load(dctl, e * NPCTL + POWNER) == -1:
+        if (tried >> e) & 1 == 0 and load(dctl, e * NPCTL + POWNER) == -1:
             c = load(dctl, e * NPCTL + PCLOCK)
             if c < bc:
                 bc = c
@@ -171,8 +172,6 @@ def _claim(dctl, ndom, me, dtb, skip):
     if best >= 0 and cas(dctl, best * NPCTL + POWNER, -1, me) == -1:
         return best
     return -1
-
-
 
 
 @kernel(inline=True)
@@ -246,7 +245,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     dlo, dhi, dtour_t, dtour_s = doms
     ndom = dlo.shape[0]
     cur = -1
-    skip = -1
+    tried = np.int64(0)  # domains whose next event was blocked since the last event or wait
     oclock = -INF
     waiting = False
     nblk = 0
@@ -280,12 +279,13 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 return OK
             blocked = True
         if not blocked and cur < 0:
-            cur = _claim(dctl, ndom, me, dtb, skip)
-            if cur < 0 and skip >= 0:
-                skip = -1
-                cur = _claim(dctl, ndom, me, dtb, skip)
+            cur = _claim(dctl, ndom, me, dtb, tried)
             if cur < 0:
-                if _done(dctl, tctl, ndom, nthr, dtb):
+                if tried != 0:
+                    # every free domain was tried since the last event or wait:
+                    # wait once, then try them all again
+                    tried = 0
+                elif _done(dctl, tctl, ndom, nthr, dtb):
                     return OK
                 blocked = True
         if not blocked:
@@ -297,7 +297,6 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             if i < 0 or not t < dt:
                 store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
-                skip = -1
                 continue
             tb = float_bits(t)
             p = evp[i]
@@ -343,7 +342,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 st[S_BLOCKED] += 1
                 store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
-                skip = d
+                # try the other free domains before any wait: a yield per blocked
+                # pick cost more than the waits themselves (``_claim``)
+                tried |= np.int64(1) << d
+                continue
         if blocked:
             wait_from, checked, seen, nblk, stalled = wait_blocked(
                 dctl, ndom, NPCTL, PPROG, st, waiting, wait_from, checked, seen, nblk,
@@ -355,6 +357,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             continue
         waiting = False
         nblk = 0
+        tried = np.int64(0)
         store(tctl, me * NTCTL, 1)
         if rng != 0:
             rng = _pause(rng)
