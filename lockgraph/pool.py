@@ -342,8 +342,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 st[S_BLOCKED] += 1
                 store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
-                # try the other free domains before any wait: a yield per blocked
-                # pick cost more than the waits themselves (``_claim``)
+                # try the other free domains before any wait: a yield after every
+                # blocked pick cost more than the waits themselves (README, Benchmarks)
                 tried |= np.int64(1) << d
                 continue
         if blocked:
