@@ -30,7 +30,10 @@ commit that no particle it wrote or read (i, j and their candidates, the
 pairs found during the event included) carries a later time: any event that
 read or wrote what this one writes, or wrote what it read, wrote one of those
 particles.  A later time is a violation: the step is redone sequentially
-(a repair), so the result is always the sequential one bit for bit.  The
+(a repair), so the result is always the sequential one bit for bit.  A pick
+whose particle's event changed before its look passed (the same pair event
+held by both particles, run from the other side) is *stale*: it is withdrawn,
+not repaired.  The
 ordering of the two checks across threads is by full fences: an event that
 is not interior publishes its ``wt`` with an atomic maximum before it reads any
 particle, and the checking commit runs under its domain's lock.
@@ -338,6 +341,17 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                     if not nowait and not _ordered(dctl, dtour_t, dtour_s, ids, w, tb, t, ids[i]):
                         store(dctl, d * NPCTL + PINFL, float_bits(INF))
                         blocked = True
+                    elif not nowait and (evt[i] != t or evp[i] != p):
+                        # a stale pick: since the root was read, another thread's event
+                        # with i as its partner has committed (the look just passed), so
+                        # i has a new event.  Running the old one would be wrong, skipping
+                        # it is not: withdraw and read the root again (the writer's own
+                        # commit checks its order).  The times published on i and j stay:
+                        # a time too late can make a check fail, never pass (README,
+                        # Repairs).
+                        store(dctl, d * NPCTL + PINFL, float_bits(INF))
+                        st[S_BLOCKED] += 1
+                        continue
             if blocked:
                 st[S_BLOCKED] += 1
                 store(dctl, d * NPCTL + POWNER, -1)
@@ -365,7 +379,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         check = w != 0 or late or strict
         r0 = st[S_REACHOUT]
         if evt[i] != t or evp[i] != p:
-            # i's event changed since it was read: another thread wrote i
+            # i's event changed since it was read, and after the last look: another
+            # thread wrote i out of order (only without waiting: ``NOWAIT``)
             st[S_VIOL] += 1
             status = VIOLATION
             jw = -1
