@@ -297,6 +297,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             i = dtour_s[d][1]
             t = dtour_t[d][1] if i >= 0 else INF
             spin_unlock(dctl, d * NPCTL + PLOCK)
+            if rng != 0:  # fault injection: widens the gap a stale pick comes through
+                rng = _pause(rng)
             if i < 0 or not t < dt:
                 store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
