@@ -69,14 +69,16 @@ from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_C
                       S_REACHOUT, S_VIOL, STALL, VIOLATION, journal_room,
                       process_event)
 from .neighbors import LCOUNT
-from .parallel import ABORT, JITTER, NOWAIT, _fail, _pause, _progress, wait_blocked
+from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
+                       wait_blocked)
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
-# per-domain row of dctl (four cache lines): its lock; its clock and the time of
+# per-domain row of dctl (four cache lines): its lock and its queue's version
+# (bumped under the lock at every change of the queue); its clock and the time of
 # its event in flight (INF when none), read together; owner and progress; the
 # latest event time it ran
-PLOCK, PCLOCK, PINFL, POWNER, PPROG, PHIGH, PSETTLE = 0, 8, 9, 16, 17, 24, 25
+PLOCK, PVER, PCLOCK, PINFL, POWNER, PPROG, PHIGH, PSETTLE = 0, 1, 8, 9, 16, 17, 24, 25
 NPCTL = 32
 # one row more after the domains' rows: nonzero once a pair found mid-step broke
 # the masks (counted by the engine: ``Engine.pool_checked_steps``)
@@ -229,13 +231,25 @@ def _publish_pool(dctl, d, tour_t, tour_s):
     store(dctl, d * NPCTL + PCLOCK, float_bits(t))
 
 
+@kernel(inline=True)
+def _note_root(dctl, d, tour_t, tour_s, seen_v, seen_i, seen_t):
+    """Under d's lock, after its queue changed: a new version, and the root
+    as this thread now sees it."""
+    v = dctl[d * NPCTL + PVER] + 1
+    store(dctl, d * NPCTL + PVER, v)
+    seen_v[d] = v
+    seen_i[d] = tour_s[1]
+    seen_t[d] = tour_t[1] if tour_s[1] >= 0 else INF
+
+
 @kernel
 def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, pst, doms, ctrl,
                 dctl, tctl, window, stall_cycles):
     """Thread ``me`` of ``nthr``: claims domains and runs their events until the
-    step is done.  ``pst = (h2, wt, sdom, checked)``: per slot, the two-hop
-    domain mask, the latest event time on it (float bits, -1 before any), its
-    domain and its checked mark (``kernels.expose_pair``);
+    step is done.  ``pst = (h2, wt, sdom, checked, seen)``: per slot, the
+    two-hop domain mask, the latest event time on it (float bits, -1 before
+    any), its domain and its checked mark (``kernels.expose_pair``); ``seen``:
+    per thread and domain, a queue version and the root then (slot, time);
     ``doms = (dlo, dhi, dtour_t, dtour_s)``.  Returns its final status."""
     ids = parts[7]
     noff, nent, xhead, xent, xnext, ctr = nbrs
@@ -244,10 +258,16 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     logt = jour[3]
     dt = cfg[0][P_DT]
     dtb = float_bits(dt)
-    h2, wt, sdom, marked = pst
+    h2, wt, sdom, marked, seen = pst
     dlo, dhi, dtour_t, dtour_s = doms
     ndom = dlo.shape[0]
     cur = -1
+    # each domain's root as this thread last saw it under the domain's lock, and
+    # the queue's version then: while the version holds, the root holds
+    seen_v = seen[0][me]
+    seen_i = seen[1][me]
+    seen_t = seen[2][me]
+    seen_v[:] = -1
     tried = np.int64(0)  # domains whose next event was blocked since the last event or wait
     oclock = -INF
     waiting = False
@@ -293,10 +313,20 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 blocked = True
         if not blocked:
             d = cur
-            spin_lock(dctl, d * NPCTL + PLOCK)
-            i = dtour_s[d][1]
-            t = dtour_t[d][1] if i >= 0 else INF
-            spin_unlock(dctl, d * NPCTL + PLOCK)
+            if load(dctl, d * NPCTL + PVER) == seen_v[d]:
+                # the queue has not changed since this thread last read its root
+                # (a change that begins now comes after this read, as if the lock
+                # had been taken just before it): no lock round trip
+                i = seen_i[d]
+                t = seen_t[d]
+            else:
+                spin_lock(dctl, d * NPCTL + PLOCK)
+                i = dtour_s[d][1]
+                t = dtour_t[d][1] if i >= 0 else INF
+                seen_v[d] = dctl[d * NPCTL + PVER]
+                spin_unlock(dctl, d * NPCTL + PLOCK)
+                seen_i[d] = i
+                seen_t[d] = t
             if rng != 0:  # fault injection: widens the gap a stale pick comes through
                 rng = _pause(rng)
             if i < 0 or not t < dt:
@@ -426,7 +456,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         store(dctl, d * NPCTL + PPROG, load(dctl, d * NPCTL + PPROG) + 1)
         if e != d:
             _publish_pool(dctl, e, dtour_t[e], dtour_s[e])
+            _note_root(dctl, e, dtour_t[e], dtour_s[e], seen_v, seen_i, seen_t)
         _publish_pool(dctl, d, dtour_t[d], dtour_s[d])
+        _note_root(dctl, d, dtour_t[d], dtour_s[d], seen_v, seen_i, seen_t)
         store(dctl, d * NPCTL + PINFL, float_bits(INF))
         store(dctl, d * NPCTL + PSETTLE, 0)
         if tb > dctl[d * NPCTL + PHIGH]:
@@ -452,9 +484,9 @@ def hold_until_abort(dctl, ctrl):
 
 
 def pool_state(noff, nent, dlo, dhi, n, pmap, threads):
-    """Per-slot arrays of a pool step, (h2, wt, sdom, checked), and ``grow``'s
-    view ``(sdom, -, -, (h1, h2, checked, exposed))``, the masks built on the
-    threads."""
+    """Per-slot arrays of a pool step, (h2, wt, sdom, checked), the threads'
+    rows of seen queue roots, and ``grow``'s view ``(sdom, -, -, (h1, h2,
+    checked, exposed))``, the masks built on the threads."""
     sdom = np.empty(n, np.int64)
     domain_of_slots(dlo, dhi, sdom)
     hops = np.zeros((4, n), np.int64)  # h1, h2, checked, exposed (``kernels.expose_pair``)
@@ -466,4 +498,7 @@ def pool_state(noff, nent, dlo, dhi, n, pmap, threads):
                      for k in range(threads)])
     wt = np.full(n, -1, np.int64)
     locks = (sdom.astype(np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
-    return (h2, wt, sdom, hops[2]), locks
+    width = -(-len(dlo) // 8) * 8  # whole cache lines: a row is one thread's
+    seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
+            cache_aligned((threads, width)))
+    return (h2, wt, sdom, hops[2], seen), locks
