@@ -378,9 +378,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                         # with i as its partner has committed (the look just passed), so
                         # i has a new event.  Running the old one would be wrong, skipping
                         # it is not: withdraw and read the root again (the writer's own
-                        # commit checks its order).  The times published on i and j stay:
-                        # a time too late can make a check fail, never pass (README,
-                        # Repairs).
+                        # commit checks its order); counted as a blocked pick.  The times
+                        # published on i and j stay: a time too late can make a check
+                        # fail, never pass (README, Threads).
                         store(dctl, d * NPCTL + PINFL, float_bits(INF))
                         st[S_BLOCKED] += 1
                         continue
