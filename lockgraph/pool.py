@@ -226,20 +226,17 @@ def _settle(dctl, ctrl, d, ndom, stall_cycles):
 
 
 @kernel(inline=True)
-def _publish_pool(dctl, d, tour_t, tour_s):
-    t = tour_t[1] if tour_s[1] >= 0 else INF
+def _publish_pool(dctl, d, tour_t, tour_s, seen_v, seen_i, seen_t):
+    """Under d's lock, after its queue changed: its clock, a new version, and
+    the root as this thread now sees it."""
+    r = tour_s[1]
+    t = tour_t[1] if r >= 0 else INF
     store(dctl, d * NPCTL + PCLOCK, float_bits(t))
-
-
-@kernel(inline=True)
-def _note_root(dctl, d, tour_t, tour_s, seen_v, seen_i, seen_t):
-    """Under d's lock, after its queue changed: a new version, and the root
-    as this thread now sees it."""
     v = dctl[d * NPCTL + PVER] + 1
     store(dctl, d * NPCTL + PVER, v)
     seen_v[d] = v
-    seen_i[d] = tour_s[1]
-    seen_t[d] = tour_t[1] if tour_s[1] >= 0 else INF
+    seen_i[d] = r
+    seen_t[d] = t
 
 
 @kernel
@@ -455,10 +452,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         # progress first: a look that sees the new clocks then sees it too (_done)
         store(dctl, d * NPCTL + PPROG, load(dctl, d * NPCTL + PPROG) + 1)
         if e != d:
-            _publish_pool(dctl, e, dtour_t[e], dtour_s[e])
-            _note_root(dctl, e, dtour_t[e], dtour_s[e], seen_v, seen_i, seen_t)
-        _publish_pool(dctl, d, dtour_t[d], dtour_s[d])
-        _note_root(dctl, d, dtour_t[d], dtour_s[d], seen_v, seen_i, seen_t)
+            _publish_pool(dctl, e, dtour_t[e], dtour_s[e], seen_v, seen_i, seen_t)
+        _publish_pool(dctl, d, dtour_t[d], dtour_s[d], seen_v, seen_i, seen_t)
         store(dctl, d * NPCTL + PINFL, float_bits(INF))
         store(dctl, d * NPCTL + PSETTLE, 0)
         if tb > dctl[d * NPCTL + PHIGH]:
