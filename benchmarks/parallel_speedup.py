@@ -16,7 +16,12 @@ ratios and the paired median (of the per-step ratios: the exact policy follows
 the sequential trajectory, so step i is the same work in every engine), the
 events per step, the threaded run's mean concurrency, violations
 and repairs — and whether the final states are bitwise identical (they must
-be: the exact policy's guarantee, checked here on every benchmark run).
+be: the exact policy's guarantee, checked here on every benchmark run).  The
+last two columns split the step (``Engine.phase_seconds``): the search
+(reaches, tree, pair search, candidate lists; data-parallel, so its paired
+ratio is what the machine gives two threads at that time) and the events
+(first predictions, queues and the events: the schedule's part), each as its
+median ms per step and its paired median speedup.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
@@ -225,12 +230,17 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         base_on_one = {k: _on_one(e) for k, e in engines.items()}
         walls = {k: [] for k in engines}
         per_step = {k: [] for k in engines}
+        phases = {k: {"search": [], "events": []} for k in engines}  # per step
         for r in range(repeats):
             for _ in range(steps):  # the engines take each step in turn
                 for label, eng in engines.items():
+                    ph0 = eng.phase_seconds
                     t0 = time.perf_counter()
                     eng.step()
                     per_step[label].append(time.perf_counter() - t0)
+                    ph1 = eng.phase_seconds
+                    for k, v in phases[label].items():
+                        v.append(ph1[k] - ph0[k])
             for label in engines:
                 walls[label].append(sum(per_step[label][-steps:]) / steps)
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
@@ -250,6 +260,13 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 # same work for every engine: a paired ratio, robust to a noisy minute
                 "speedup_paired": statistics.median(
                     a / b for a, b in zip(per_step["sequential"], per_step[label])),
+                # the same by phase: the search (tree, pair search: data-parallel,
+                # so its ratio is what this machine gives two threads at the time)
+                # and the events (first predictions, queues, events: the schedule's)
+                "phase_ms": {k: 1e3 * statistics.median(v) for k, v in phases[label].items()},
+                "phase_speedup_paired": {k: statistics.median(
+                    a / b for a, b in zip(phases["sequential"][k], v) if b > 0)
+                    for k, v in phases[label].items()},
                 "events_per_step": float(d[K.S_POPS]) / (steps * repeats),
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
@@ -270,7 +287,8 @@ def print_case(name, res):
           f"{res['steps']} steps x {res['repeats']} repeats")
     print(f"  {'engine':29s} {'ms/step':>9s} {'speedup':>8s} {'(median)':>9s} {'(paired)':>9s} "
           f"{'events/step':>12s} {'concurrency':>12s} {'viol.':>6s} {'repairs':>8s} "
-          f"{'identical':>10s} {'regions':>8s} {'interior':>9s} {'on 1 thread':>12s}")
+          f"{'identical':>10s} {'regions':>8s} {'interior':>9s} {'on 1 thread':>12s} "
+          f"{'search ms (x)':>14s} {'events ms (x)':>14s}")
     for label, r in res["runs"].items():
         lk = r.get("locks", {})
         print(f"  {label:29s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
@@ -278,7 +296,9 @@ def print_case(name, res):
               f"{r['mean_concurrency']:12.2f} {r['violations']:6d} {r['repairs']:8d} "
               f"{str(r['identical']):>10s} {lk.get('regions', ''):>8} "
               f"{lk.get('interior_fraction', float('nan')):9.2f} "
-              f"{r.get('events_on_one_thread', 0):12d}")
+              f"{r.get('events_on_one_thread', 0):12d} "
+              + " ".join(f"{r['phase_ms'][k]:7.1f} ({r['phase_speedup_paired'][k]:4.2f})"
+                         for k in ("search", "events")))
 
 
 def main():

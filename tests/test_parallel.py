@@ -627,3 +627,33 @@ def test_repaired_steps_count_their_violations():
     finally:
         seq.close()
         sim.close()
+
+
+@pytest.mark.parametrize("threads,schedule", [(1, "parallel"), (2, "pool")])
+def test_phase_seconds_split_each_step_and_count_a_failed_one(threads, schedule):
+    """``Engine.phase_seconds``: the search and the events are disjoint parts of
+    the steps' wall time (so ``other`` is never negative), every phase only
+    grows, and a step that fails still counts the time it took."""
+    cfg = SMALL["dish"]
+    sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, leaf_size=4, threads=threads, schedule=schedule)
+    try:
+        seen = eng.phase_seconds
+        assert seen == {"search": 0.0, "events": 0.0, "other": 0.0, "step": 0.0}
+        for _ in range(3):
+            eng.step()
+            now = eng.phase_seconds
+            assert set(now) == {"search", "events", "other", "step"}
+            assert all(now[k] > seen[k] for k in ("search", "events", "step"))
+            assert now["other"] >= 0.0
+            assert now["search"] + now["events"] + now["other"] == pytest.approx(now["step"])
+            seen = now
+        if threads > 1:
+            eng.workers.fault = 0  # worker 0 raises: the step fails
+            with pytest.raises(RuntimeError, match="injected fault"):
+                eng.step()
+            now = eng.phase_seconds
+            assert now["step"] > seen["step"] and now["search"] > seen["search"]
+            assert now["other"] >= 0.0
+    finally:
+        eng.close()
