@@ -107,6 +107,7 @@ def cmd_run(args):
         "wall_collisions": stats["wall_collisions"],
         "guarded_impacts": stats["guarded_impacts"],
         "wall_s": stats["wall_s"],
+        "phase_s": stats["phase_s"],
         "compile_s": stats["compile_s"],
         "events_per_s": stats["events_per_s"],
         "max_overlap": stats["max_overlap"],

@@ -238,6 +238,9 @@ class Simulation:
             "floor_impulse": float(t[K.S_FLOORIMP]),
             "cylinder_impulse": float(t[K.S_CYLIMP]),
             "wall_s": self.wall_s,
+            # wall seconds by phase: search (tree, pair search), events (first
+            # predictions, queues, events), other, step (Engine.phase_seconds)
+            "phase_s": self._engine.phase_seconds,
             "compile_s": self.compile_s,
             "events_per_s": (pairs + walls) / self.wall_s if self.wall_s > 0 else 0.0,
             "threads": self.threads,

@@ -10,7 +10,7 @@ from lockgraph import _jit
 from lockgraph.cli import main
 
 REQUIRED = ["scene", "state", "n", "steps", "threads", "lock", "scale", "collisions",
-            "guarded_impacts", "wall_s",
+            "guarded_impacts", "wall_s", "phase_s",
             "compile_s", "events_per_s", "max_overlap", "violations", "state_sha256",
             "peak_rss_mb"]
 
@@ -28,6 +28,10 @@ def test_json_fields(capsys):
         assert k in d, k
     assert d["scene"] == "gas" and d["n"] == 256 and d["steps"] == 5
     assert d["collisions"] > 0 and d["max_overlap"] < 1e-12 and d["violations"] == 0
+    # the phases split the steps' time, which the run's wall time encloses
+    ph = d["phase_s"]
+    assert set(ph) == {"search", "events", "other", "step"}
+    assert min(ph.values()) >= 0.0 and 0.0 < ph["step"] <= d["wall_s"]
 
 
 def test_param_override(capsys):
