@@ -328,7 +328,9 @@ def main():
                    if kv[0] != "sequential" else 0)
         print(f"  {c} N={res['n']}: best {best[0]} {best[1]['speedup_best']:.2f}x "
               f"({best[1]['speedup_best'] / TARGET:.2f} of the target; paired median "
-              f"{best[1]['speedup_paired']:.2f}x); all identical: "
+              f"{best[1]['speedup_paired']:.2f}x; its search phase, data-parallel, "
+              f"{best[1]['phase_speedup_paired']['search']:.2f}x, its events "
+              f"{best[1]['phase_speedup_paired']['events']:.2f}x); all identical: "
               f"{all(r['identical'] for r in res['runs'].values())}")
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
     if args.out:
