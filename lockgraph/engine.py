@@ -659,8 +659,9 @@ class Engine:
                 self._rollback()  # interrupted or a worker failed: undo the step
                 self.ctr[K.LCOUNT] = log_start
                 raise
-            spent += time.perf_counter() - began
-            self.phase_s[PH_EVENTS] += time.perf_counter() - began
+            took = time.perf_counter() - began
+            spent += took
+            self.phase_s[PH_EVENTS] += took
             if status == K.OK:
                 st[K.S_JNEXT] = st[K.S_JEND] = 0.0  # journal cursors, not statistics
                 if self.record_events:

@@ -495,7 +495,7 @@ def pool_state(noff, nent, dlo, dhi, n, pmap, threads, keep):
     checked, exposed))``, the masks built on the threads.  The per-slot
     arrays live in the dict ``keep`` from one step to the next and are filled
     here (fresh ones each step cost page faults: ring N = 2e5, this call
-    1.96-2.34 ms a step with its 9.6 MB new, of which 1.2-1.4 ms the masks)."""
+    1.96-2.34 ms a step with its 10 MB new, of which 1.1-1.4 ms the masks)."""
     if keep.get("n") != n:
         keep.update(n=n, sdom=np.empty(n, np.int64), sdom32=np.empty(n, np.int32),
                     hops=np.empty((4, n), np.int64), wt=np.empty(n, np.int64))

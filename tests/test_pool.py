@@ -21,7 +21,7 @@ from lockgraph.engine import Engine
 from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import regions_adjacent
-from lockgraph.pool import domain_of_slots, hop_masks
+from lockgraph.pool import domain_of_slots, hop_masks, pool_state
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -254,3 +254,29 @@ def test_pool_statistics_and_options():
     ph = Physics(PeriodicCube(12.0), (), Constant(1.0))
     with pytest.raises(InputError, match="^schedule: 'pool' .* no 'paper' policy"):
         Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
+
+
+def test_pool_arrays_kept_across_steps_carry_nothing_over():
+    """``pool_state`` keeps its per-slot arrays (domains, masks, event times,
+    marks) in the engine from one step to the next and fills them at each
+    step's start: with garbage written into every one of them it returns
+    exactly what it returns with fresh arrays."""
+    rng = np.random.default_rng(5)
+    n = 300
+    noff, nent, rows = random_csr(n, 500, rng)
+    dlo = np.array([0, 70, 150, 230], np.int64)
+    dhi = np.array([70, 150, 230, n], np.int64)
+    pmap = lambda fn, arglist: [fn(*args) for args in arglist]  # noqa: E731
+    want_pst, want_locks = pool_state(noff, nent, dlo, dhi, n, pmap, 2, {})
+    keep = {}
+    pool_state(noff, nent, dlo, dhi, n, pmap, 2, keep)
+    for name in ("sdom", "sdom32", "hops", "wt"):
+        a = keep[name]
+        a[...] = rng.integers(-2**31, 2**31, a.shape).astype(a.dtype)
+    arrays = (keep["sdom"], keep["hops"])
+    pst, locks = pool_state(noff, nent, dlo, dhi, n, pmap, 2, keep)
+    assert pst[2] is arrays[0] and locks[3] is arrays[1]  # the same arrays, refilled
+    for got, want in zip(pst[:4], want_pst[:4]):  # h2, wt, sdom, checked
+        assert np.array_equal(got, want)
+    assert np.array_equal(locks[0], want_locks[0]) and np.array_equal(locks[3], want_locks[3])
+    assert (pst[1] == -1).all() and (locks[3][2:] == 0).all()
