@@ -497,19 +497,19 @@ def pool_state(noff, nent, dlo, dhi, n, pmap, threads, keep):
     here (fresh ones each step cost page faults: ring N = 2e5, this call
     1.96-2.34 ms a step with its 10 MB new, of which 1.1-1.4 ms the masks)."""
     if keep.get("n") != n:
-        keep.update(n=n, sdom=np.empty(n, np.int64), sdom32=np.empty(n, np.int32),
-                    hops=np.empty((4, n), np.int64), wt=np.empty(n, np.int64))
-    sdom, sdom32, wt = keep["sdom"], keep["sdom32"], keep["wt"]
+        # sdom int32: also ``grow``'s lock_of, so one array serves both
+        keep.update(n=n, sdom=np.empty(n, np.int32), hops=np.empty((4, n), np.int64),
+                    wt=np.empty(n, np.int64))
+    sdom, wt = keep["sdom"], keep["wt"]
     hops = keep["hops"]  # h1, h2, checked, exposed (``kernels.expose_pair``)
     domain_of_slots(dlo, dhi, sdom)
-    np.copyto(sdom32, sdom, casting="unsafe")
     h1, h2 = hops[0], hops[1]
     cuts = [n * k // threads for k in range(threads + 1)]
     pmap(first_hops, [(noff, nent, sdom, h1, wt, hops[2], hops[3], cuts[k], cuts[k + 1])
                       for k in range(threads)])
     pmap(hop_masks, [(noff, nent, sdom, h1, h2, cuts[k], cuts[k + 1], False)
                      for k in range(threads)])
-    locks = (sdom32, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
+    locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
     width = -(-len(dlo) // 8) * 8  # whole cache lines: a row is one thread's
     seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
             cache_aligned((threads, width)))

@@ -270,7 +270,7 @@ def test_pool_arrays_kept_across_steps_carry_nothing_over():
     want_pst, want_locks = pool_state(noff, nent, dlo, dhi, n, pmap, 2, {})
     keep = {}
     pool_state(noff, nent, dlo, dhi, n, pmap, 2, keep)
-    for name in ("sdom", "sdom32", "hops", "wt"):
+    for name in ("sdom", "hops", "wt"):
         a = keep[name]
         a[...] = rng.integers(-2**31, 2**31, a.shape).astype(a.dtype)
     arrays = (keep["sdom"], keep["hops"])
