@@ -25,7 +25,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, pool_state
+from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domain, pool_state
 from .parallel import (INTERIOR, Workers, cache_aligned, classify_ranges, classify_regions,
                        cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
@@ -643,15 +643,23 @@ class Engine:
                 # threads beside the caller (ring N = 2e5, 16 domains:
                 # 3.9 ms a step dealt, against 1.6 + 1.1 ms for the claimed
                 # first events and the one queue)
-                self._claimed(K.init_range, nd, lambda d, k: (
-                    parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d], dtour_t[d], dtour_s[d]))
+                if self.schedule == "pool":  # and the pool's words of the domain's slots
+                    pst, locks = pool_state(self.n, nd, self.threads, self._pool_keep)
+                    hops, wt, sdom = pst[:3]
+                    self._claimed(init_domain, nd, lambda d, k: (
+                        d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
+                        dtour_t[d], dtour_s[d]))
+                else:
+                    self._claimed(K.init_range, nd, lambda d, k: (
+                        parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d], dtour_t[d],
+                        dtour_s[d]))
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
             try:
                 if sequential:
                     status = self._events_sequential(st, img_pos, img_vel, full, half)
                 elif self.schedule == "pool":
                     status = self._events_pool(st, img_pos, img_vel, full,
-                                               (dlo, dhi, dtour_t, dtour_s))
+                                               (dlo, dhi, dtour_t, dtour_s), pst, locks)
                 else:
                     status = self._events_parallel(st, img_pos, img_vel, half, full,
                                                    (dlo, dhi, dtour_t, dtour_s))
@@ -845,12 +853,11 @@ class Engine:
         k = max(1, min(int(self.pool_domains), MAX_DOMAINS, self.n))
         return 1 << (k.bit_length() - 1)
 
-    def _events_pool(self, st, img_pos, img_vel, full, queues):
-        """The step's events under ``schedule="pool"`` (``lockgraph/pool.py``):
-        the domains' masks, then the threads until done."""
+    def _events_pool(self, st, img_pos, img_vel, full, queues, pst, locks):
+        """The step's events under ``schedule="pool"`` (``lockgraph/pool.py``)
+        on the threads until done; ``pst``, ``locks``: ``pool.pool_state``,
+        filled with the first events (``pool.init_domain``)."""
         dlo, dhi, dtour_t, dtour_s = queues
-        pst, locks = pool_state(self.noff, self.nent, dlo, dhi, self.n, self._pmap,
-                                self.threads, self._pool_keep)
         nd = len(dlo)
         pctl = cache_aligned((nd + 1, NPCTL), np.int64)  # and the step's row (PCHECKED)
         pctl[:, PHIGH] = -1

@@ -30,9 +30,9 @@ which is the tree order of the current step):
   arrays when running sequentially); a widened reach that brings together
   particles of non-adjacent regions is a violation of the lock design.  The
   pool schedule has no regions: ``lock_of`` is each slot's domain and
-  ``hops`` (4, N) int64 its one- and two-hop domain masks and its checked and
-  exposed marks (``pool``); the rule for a new pair is then ``pool``'s
-  (``regions_adjacent``).  ``hops`` is (4, 0) otherwise.
+  ``hops`` (4, N) int64 its one- and two-hop domain masks (0 until first
+  used: ``hop1``, ``hop2``) and its checked and exposed marks (``pool``);
+  the rule for a new pair is then ``pool``'s (``regions_adjacent``).  ``hops`` is (4, 0) otherwise.
 * ``st`` (NSTAT,) float64 — statistics of the step (one row per thread); its
   slots ``S_JNEXT`` / ``S_JEND`` hold the calling thread's journal block (not
   statistics: the engine clears them).
@@ -50,7 +50,7 @@ import numpy as np
 from ._jit import kernel
 
 from .events import CYLINDER, FLOOR, NONE, update_queue, update_queue_pair, build_queue
-from .atomics import cycles, fetch_add, fetch_max, float_bits
+from .atomics import cycles, fetch_add, fetch_max, float_bits, load, store
 from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
 from .predict import (INF, cylinder_time, cylinder_time_by, floor_time, floor_time_by,
                       pair_time, pair_time_by)
@@ -239,7 +239,38 @@ def log_event(jour, ctr, t, a, b, img):
 
 
 @kernel(inline=True)
-def regions_adjacent(locks, a, b):
+def hop1(hops, sdom, noff, nent, s):
+    """The pool's one-hop domain mask of slot s: the domains of s and its
+    step-start candidates (CSR), worked out at its first use in the step and
+    kept in ``hops[0]`` (0 until then: a mask always holds s's own domain).
+    Threads that race to fill it write the same value (atomic words: a
+    reader sees 0 or the mask, nothing torn)."""
+    h1 = hops[0]
+    m = load(h1, s)
+    if m == 0:
+        m = np.int64(1) << sdom[s]
+        for k in range(noff[s], noff[s + 1]):
+            m |= np.int64(1) << sdom[nent[k] >> 5]
+        store(h1, s, m)
+    return m
+
+
+@kernel(inline=True)
+def hop2(hops, sdom, noff, nent, s):
+    """The pool's two-hop domain mask of slot s: ``hop1`` over s and its
+    step-start candidates, kept in ``hops[1]`` like ``hop1``."""
+    h2 = hops[1]
+    m = load(h2, s)
+    if m == 0:
+        m = hop1(hops, sdom, noff, nent, s)
+        for k in range(noff[s], noff[s + 1]):
+            m |= hop1(hops, sdom, noff, nent, nent[k] >> 5)
+        store(h2, s, m)
+    return m
+
+
+@kernel(inline=True)
+def regions_adjacent(locks, noff, nent, a, b):
     """Are the lock regions of slots a and b the same or adjacent?  With
     domain masks (the pool): may a and b become candidates without changing
     any mask?  Each one's domain is already one hop from the other, and each
@@ -247,10 +278,11 @@ def regions_adjacent(locks, a, b):
     event's wait set (two hops) still covers what it reads and writes."""
     lock_of, loff, ladj, hops = locks
     if hops.shape[1] > 0:
-        h1a = hops[0, a]
-        h1b = hops[0, b]
+        h1a = hop1(hops, lock_of, noff, nent, a)
+        h1b = hop1(hops, lock_of, noff, nent, b)
         return ((h1a >> lock_of[b]) & 1) != 0 and ((h1b >> lock_of[a]) & 1) != 0 and \
-            (h1b & ~hops[1, a]) == 0 and (h1a & ~hops[1, b]) == 0
+            (h1b & ~hop2(hops, lock_of, noff, nent, a)) == 0 and \
+            (h1a & ~hop2(hops, lock_of, noff, nent, b)) == 0
     la = lock_of[a]
     lb = lock_of[b]
     if la == lb:
@@ -357,7 +389,7 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
                     continue
                 if pair_reach_ok(anc, reach, k, m, ox, oy, oz):
                     hops = locks[3]
-                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, k, m):
+                    if locks[0].shape[0] > 0 and not regions_adjacent(locks, noff, nent, k, m):
                         # beyond the lock design: regions thought independent now interact
                         st[S_REACHOUT] += 1
                         if hops.shape[1] > 0:

@@ -11,7 +11,8 @@ against 1.56x with one domain per thread.
 **Who waits for whom** (by particle, from the step's candidate lists, not
 lock regions).  An event at key k of slots i (and partner j) writes i and j
 and reads their candidates.  ``h1[s]``: the domains of s and its candidates;
-``h2[s]``: the union of ``h1`` over s and its candidates (two hops).  The
+``h2[s]``: the union of ``h1`` over s and its candidates (two hops); each
+worked out at its first use in the step (``kernels.hop1``, ``hop2``).  The
 event waits until every other domain in ``h2[i] | h2[j]`` has no event with
 a smaller key in its queue (its *clock*, the queue's root, is later) and
 no event in flight at the same time or earlier (published apart from the
@@ -66,7 +67,7 @@ from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits,
                       sched_yield, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
 from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
-                      S_REACHOUT, S_VIOL, STALL, VIOLATION, journal_room,
+                      S_REACHOUT, S_VIOL, STALL, VIOLATION, hop2, init_range, journal_room,
                       process_event)
 from .neighbors import LCOUNT
 from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
@@ -87,35 +88,26 @@ NTCTL = 8  # per-thread row of tctl: in flight
 
 
 @kernel
-def domain_of_slots(dlo, dhi, sdom):
-    """sdom[s]: the domain whose slot range holds s."""
-    for d in range(dlo.shape[0]):
-        for s in range(dlo[d], dhi[d]):
-            sdom[s] = d
-
-
-@kernel
-def hop_masks(noff, nent, sdom, src, dst, lo, hi, first):
-    """For slots lo..hi-1: dst[s] = the union of src over s and its candidates,
-    where src is the one-hot domain bit when ``first`` (so dst = h1) and h1
-    otherwise (dst = h2).  Candidate lists from the step-start search (CSR)."""
+def clear_words(d, sdom, wt, hops, lo, hi):
+    """The pool's words of domain d's slots lo..hi-1 at the step start: the
+    domain, no event time, masks not yet worked out (``kernels.hop1``,
+    ``hop2``), unchecked, unexposed."""
     for s in range(lo, hi):
-        m = (np.int64(1) << sdom[s]) if first else src[s]
-        for k in range(noff[s], noff[s + 1]):
-            q = nent[k] >> 5
-            m |= (np.int64(1) << sdom[q]) if first else src[q]
-        dst[s] = m
-
-
-@kernel
-def first_hops(noff, nent, sdom, h1, wt, checked, exposed, lo, hi):
-    """For slots lo..hi-1: the step's start values of the pool's per-slot
-    words (no event time, unchecked, unexposed) and ``h1`` (``hop_masks``)."""
-    for s in range(lo, hi):
+        sdom[s] = d
         wt[s] = -1
-        checked[s] = 0
-        exposed[s] = 0
-    hop_masks(noff, nent, sdom, h1, h1, lo, hi, True)
+        for r in range(4):
+            hops[r, s] = 0
+
+
+@kernel
+def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
+    """Domain d at the step start: its slots' pool words (``clear_words``),
+    then their first events and the domain's queue (``kernels.init_range``).
+    The masks are filled at first use: most slots of a sparse scene never
+    need them (ring N = 2e5: 2,226 events a step; masks for every slot,
+    worked out before the events, cost 1.0-2.0 ms of a 42 ms step)."""
+    clear_words(d, sdom, wt, hops, lo, hi)
+    init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s)
 
 
 @kernel(inline=True)
@@ -254,9 +246,10 @@ def _publish_pool(dctl, d, tour_t, tour_s, seen_v, seen_i, seen_t):
 def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, pst, doms, ctrl,
                 dctl, tctl, window, stall_cycles):
     """Thread ``me`` of ``nthr``: claims domains and runs their events until the
-    step is done.  ``pst = (h2, wt, sdom, checked, seen)``: per slot, the
-    two-hop domain mask, the latest event time on it (float bits, -1 before
-    any), its domain and its checked mark (``kernels.expose_pair``); ``seen``:
+    step is done.  ``pst = (hops, wt, sdom, seen)``: per slot, the domain
+    masks and the checked and exposed marks (``kernels.hop2``,
+    ``expose_pair``), the latest event time on it (float bits, -1 before
+    any) and its domain; ``seen``:
     per thread and domain, a queue version and the root then (slot, time);
     ``doms = (dlo, dhi, dtour_t, dtour_s)``.  Returns its final status."""
     ids = parts[7]
@@ -266,7 +259,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     logt = jour[3]
     dt = cfg[0][P_DT]
     dtb = float_bits(dt)
-    h2, wt, sdom, marked, seen = pst
+    hops, wt, sdom, seen = pst
+    marked = hops[2]
     dlo, dhi, dtour_t, dtour_s = doms
     ndom = dlo.shape[0]
     cur = -1
@@ -344,9 +338,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             tb = float_bits(t)
             p = evp[i]
             j = p >> 5 if p >= 0 else -1
-            w = h2[i]
+            w = hop2(hops, sdom, noff, nent, i)
             if j >= 0:
-                w |= h2[j]
+                w |= hop2(hops, sdom, noff, nent, j)
             strict = load(marked, i) != 0 or (j >= 0 and load(marked, j) != 0)
             if strict:
                 # near a pair the masks do not know: wait for every domain (the
@@ -489,28 +483,19 @@ def hold_until_abort(dctl, ctrl):
     return OK
 
 
-def pool_state(noff, nent, dlo, dhi, n, pmap, threads, keep):
-    """Per-slot arrays of a pool step, (h2, wt, sdom, checked), the threads'
-    rows of seen queue roots, and ``grow``'s view ``(sdom, -, -, (h1, h2,
-    checked, exposed))``, the masks built on the threads.  The per-slot
-    arrays live in the dict ``keep`` from one step to the next and are filled
-    here (fresh ones each step cost page faults: ring N = 2e5, this call
-    1.96-2.34 ms a step with its 10 MB new, of which 1.1-1.4 ms the masks)."""
+def pool_state(n, nd, threads, keep):
+    """The per-slot arrays of a pool step, ``(hops, wt, sdom)`` (filled by
+    ``init_domain``), with the threads' rows of seen queue roots, and
+    ``grow``'s view ``(sdom, -, -, hops)``.  The per-slot arrays live in the
+    dict ``keep`` from one step to the next (fresh ones each step cost page
+    faults: ring N = 2e5, 1.96-2.34 ms a step with its 10 MB new)."""
     if keep.get("n") != n:
         # sdom int32: also ``grow``'s lock_of, so one array serves both
         keep.update(n=n, sdom=np.empty(n, np.int32), hops=np.empty((4, n), np.int64),
                     wt=np.empty(n, np.int64))
-    sdom, wt = keep["sdom"], keep["wt"]
-    hops = keep["hops"]  # h1, h2, checked, exposed (``kernels.expose_pair``)
-    domain_of_slots(dlo, dhi, sdom)
-    h1, h2 = hops[0], hops[1]
-    cuts = [n * k // threads for k in range(threads + 1)]
-    pmap(first_hops, [(noff, nent, sdom, h1, wt, hops[2], hops[3], cuts[k], cuts[k + 1])
-                      for k in range(threads)])
-    pmap(hop_masks, [(noff, nent, sdom, h1, h2, cuts[k], cuts[k + 1], False)
-                     for k in range(threads)])
+    sdom, wt, hops = keep["sdom"], keep["wt"], keep["hops"]
     locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
-    width = -(-len(dlo) // 8) * 8  # whole cache lines: a row is one thread's
+    width = -(-nd // 8) * 8  # whole cache lines: a row is one thread's
     seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
             cache_aligned((threads, width)))
-    return (h2, wt, sdom, hops[2], seen), locks
+    return (hops, wt, sdom, seen), locks

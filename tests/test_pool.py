@@ -20,8 +20,8 @@ from lockgraph.domains import PeriodicCube
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError
 from lockgraph.physics import Physics
-from lockgraph.kernels import regions_adjacent
-from lockgraph.pool import domain_of_slots, hop_masks, pool_state
+from lockgraph.kernels import hop1, hop2, regions_adjacent
+from lockgraph.pool import clear_words, pool_state
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -171,25 +171,41 @@ def random_csr(n, m, rng):
     return noff, nent, rows
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_hop_masks_match_breadth_first_search(seed):
-    """h1[s] and h2[s] hold exactly the domains within one and two candidate
-    hops of s; ``grow``'s rule allows a new pair (a, b) exactly when adding it
-    leaves every slot's one- and two-hop sets unchanged (recomputed by BFS)."""
-    rng = np.random.default_rng(seed)
-    n = int(rng.integers(5, 80))
-    noff, nent, rows = random_csr(n, int(rng.integers(0, 2 * n)), rng)
+def random_domains(n, rng):
+    """Up to 8 domains as runs of slots: (dlo, dhi, sdom)."""
     k = int(rng.integers(1, 9))
     cuts = np.sort(rng.integers(0, n + 1, k - 1))
     dlo = np.concatenate([[0], cuts]).astype(np.int64)
     dhi = np.concatenate([cuts, [n]]).astype(np.int64)
-    sdom = np.empty(n, np.int64)
-    domain_of_slots(dlo, dhi, sdom)
-    hops = np.empty((2, n), np.int64)
-    hop_masks(noff, nent, sdom, hops[0], hops[0], 0, n, True)
-    hop_masks(noff, nent, sdom, hops[0], hops[1], 0, n, False)
-    assert [masks_by_bfs(rows, sdom, s) for s in range(n)] == list(zip(hops[0], hops[1]))
-    locks = (sdom.astype(np.int32), np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
+    sdom = np.repeat(np.arange(k, dtype=np.int32), dhi - dlo)
+    return dlo, dhi, sdom
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hop_masks_match_breadth_first_search(seed):
+    """h1[s] and h2[s], worked out at first use in any order, hold exactly the
+    domains within one and two candidate hops of s; ``grow``'s rule allows a
+    new pair (a, b) exactly when adding it leaves every slot's one- and
+    two-hop sets unchanged (recomputed by BFS)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 80))
+    noff, nent, rows = random_csr(n, int(rng.integers(0, 2 * n)), rng)
+    dlo, dhi, sdom = random_domains(n, rng)
+    want = [masks_by_bfs(rows, sdom, s) for s in range(n)]
+    for order, h1_first in ((range(n), True), (rng.permutation(n), False)):
+        hops = np.zeros((4, n), np.int64)
+        got = {}
+        for s in order:
+            s = int(s)
+            if h1_first:
+                h1 = hop1(hops, sdom, noff, nent, s)
+                got[s] = (h1, hop2(hops, sdom, noff, nent, s))
+            else:
+                h2 = hop2(hops, sdom, noff, nent, s)
+                got[s] = (hop1(hops, sdom, noff, nent, s), h2)
+        assert [got[s] for s in range(n)] == want
+        assert list(zip(hops[0], hops[1])) == want  # kept
+    locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros((4, n), np.int64))
     for _ in range(40):
         a, b = (int(x) for x in rng.integers(0, n, 2))
         if a == b:
@@ -199,7 +215,7 @@ def test_hop_masks_match_breadth_first_search(seed):
         grown[b].append((a << 5) | 13)
         same = all(masks_by_bfs(grown, sdom, s) == masks_by_bfs(rows, sdom, s)
                    for s in range(n))
-        assert regions_adjacent(locks, a, b) == same, (a, b)
+        assert regions_adjacent(locks, noff, nent, a, b) == same, (a, b)
 
 
 def masks_by_bfs(rows, sdom, s):
@@ -258,25 +274,25 @@ def test_pool_statistics_and_options():
 
 def test_pool_arrays_kept_across_steps_carry_nothing_over():
     """``pool_state`` keeps its per-slot arrays (domains, masks, event times,
-    marks) in the engine from one step to the next and fills them at each
-    step's start: with garbage written into every one of them it returns
-    exactly what it returns with fresh arrays."""
+    marks) in the engine from one step to the next, and each domain's slots
+    are cleared with its first events (``clear_words``): with garbage written
+    into every one of them, clearing gives exactly the fresh values, and the
+    masks then worked out match breadth-first search."""
     rng = np.random.default_rng(5)
     n = 300
     noff, nent, rows = random_csr(n, 500, rng)
-    dlo = np.array([0, 70, 150, 230], np.int64)
-    dhi = np.array([70, 150, 230, n], np.int64)
-    pmap = lambda fn, arglist: [fn(*args) for args in arglist]  # noqa: E731
-    want_pst, want_locks = pool_state(noff, nent, dlo, dhi, n, pmap, 2, {})
+    dlo, dhi, want_sdom = random_domains(n, rng)
     keep = {}
-    pool_state(noff, nent, dlo, dhi, n, pmap, 2, keep)
-    for name in ("sdom", "hops", "wt"):
-        a = keep[name]
+    (hops, wt, sdom, seen), locks = pool_state(n, len(dlo), 2, keep)
+    for a in (keep["sdom"], keep["hops"], keep["wt"]):
         a[...] = rng.integers(-2**31, 2**31, a.shape).astype(a.dtype)
-    arrays = (keep["sdom"], keep["hops"])
-    pst, locks = pool_state(noff, nent, dlo, dhi, n, pmap, 2, keep)
-    assert pst[2] is arrays[0] and locks[3] is arrays[1]  # the same arrays, refilled
-    for got, want in zip(pst[:4], want_pst[:4]):  # h2, wt, sdom, checked
-        assert np.array_equal(got, want)
-    assert np.array_equal(locks[0], want_locks[0]) and np.array_equal(locks[3], want_locks[3])
-    assert (pst[1] == -1).all() and (locks[3][2:] == 0).all()
+    pst, locks = pool_state(n, len(dlo), 2, keep)
+    assert pst[0] is hops and pst[1] is wt and pst[2] is sdom  # the same arrays
+    assert locks[0] is sdom and locks[3] is hops  # grow's view of them
+    for d in rng.permutation(len(dlo)):
+        clear_words(int(d), sdom, wt, hops, dlo[d], dhi[d])
+    assert np.array_equal(sdom, want_sdom)
+    assert (wt == -1).all() and (hops == 0).all()
+    masks = [(hop1(hops, sdom, noff, nent, s), hop2(hops, sdom, noff, nent, s))
+             for s in range(n)]
+    assert masks == [masks_by_bfs(rows, sdom, s) for s in range(n)]
