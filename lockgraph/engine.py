@@ -68,10 +68,12 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep, v_
         kick_hill(pos, vel, omega, 0.5 * dt)
 
 
-def _anchor_and_bound(pos, anc, reach, ntop, nd, nbox, nreach, order):
-    """One thread's subtree: anchors (step-start positions) of its particles,
-    then the bounds of its nodes."""
+def _anchor_and_bound(pos, anc, perm, reach, ntop, nd, nbox, nreach, order):
+    """One thread's subtree: the permutation of its slots back to the
+    identity, anchors (step-start positions) of its particles, then the
+    bounds of its nodes."""
     lo, hi = int(ntop[nd, START]), int(ntop[nd, END])
+    identity(perm[lo:hi], lo)
     K.copy_rows(anc[lo:hi], pos[lo:hi])
     subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
 
@@ -568,15 +570,16 @@ class Engine:
         else:
             self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
                                        for k in range(min(t, len(arrays)))])
-        identity(self.perm)
         nnodes = self.nnodes
         if self.threads == 1:
+            identity(self.perm, 0)
             K.copy_rows(self.anc, self.pos)
             node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         else:
-            # each thread anchors its subtree's particles, then bounds its nodes
-            self._pmap(_anchor_and_bound, [(self.pos, self.anc, self.reach, self.ntop, nd,
-                                            self.nbox, self.nreach, self.order[k])
+            # each thread resets its subtree's slots of the permutation, anchors
+            # their particles, then bounds its nodes
+            self._pmap(_anchor_and_bound, [(self.pos, self.anc, self.perm, self.reach, self.ntop,
+                                            nd, self.nbox, self.nreach, self.order[k])
                                            for k, nd in enumerate(self.subroots)])
             for nd in reversed(self.top_nodes):  # pre-order reversed: children first
                 bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)

@@ -734,9 +734,11 @@ def raise_reach(ntop, nreach_bits, slot, value):
 
 
 @kernel
-def identity(perm):
+def identity(perm, first):
+    """perm[k] = first + k: a slice of the storage permutation back to the
+    identity once it has been applied."""
     for k in range(perm.shape[0]):
-        perm[k] = k
+        perm[k] = first + k
 
 
 @kernel
