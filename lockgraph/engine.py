@@ -36,9 +36,9 @@ from .neighbors import JCOUNT, NCTR, build_csr
 from .restitution import CollapseGuard, VelocityGuard
 from .schedule import EventSchedule
 from .state import State
-from .tree import (END, NTOP, START, bound_node, count_nodes, identity, node_bounds,
-                   pair_search, permute_mat3, permute_vec, resort, search_tasks, skeleton,
-                   subtree_bounds)
+from .tree import (END, NLIST, NTOP, SELF_IMAGE, START, bound_node, count_nodes, identity,
+                   node_bounds, pair_search_claimed, permute_mat3, permute_vec, resort,
+                   resort_stealing, search_frontier, skeleton, subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 NO_SLEEP = np.zeros(0)  # _finish's sleep states without sleeping grains (read only)
@@ -46,6 +46,20 @@ POLICIES = ("exact", "paper")
 SCHEDULES = ("parallel", "auto", "pool")
 # tasks per thread in the claimed phases (Engine.balance, _claimed)
 BALANCE = 4
+# The re-sort and the pair search are shared out while they run, not in fixed
+# halves: a core of this machine is at times much slower than the other (the
+# same 5 ms task took 5.07 ms median, 6.73 ms p90 on one core; 5.00 / 5.39 on
+# the other), and a fixed half waits for it.  Ring N = 2e5, two threads, the
+# fixed halves and these stepping in turn (three runs, 12 steps each):
+# re-sort 13.3-14.3 -> 12.2-13.5 ms, pair search 11.0-13.2 -> 9.9-11.6 ms.
+# Re-sort: each subtree's nodes this many levels down (at most) are taken by
+# whichever thread is free, but none smaller than STEAL_MIN_SLOTS slots (the
+# levels above stay with the subtree's thread: ring, 2.6 of 11.3 ms).
+STEAL_LEVELS = 5
+STEAL_MIN_SLOTS = 1024
+# Pair search: about this many tasks per thread (nodes of N / (SEARCH_TASKS T)
+# slots at most, and the pairs between them), claimed in the recursion's order.
+SEARCH_TASKS = 32
 PH_SEARCH, PH_EVENTS, PH_STEP = range(3)  # Engine.phase_s
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
@@ -283,6 +297,23 @@ class Engine:
         # the subtrees the threads re-sort and bound (2^depth of them), and the nodes above
         self.depth_split = max(0, math.ceil(math.log2(t))) if t > 1 else 0
         self.subroots, self.top_nodes = self._split_nodes(self.depth_split)
+        # each subtree's nodes steal_depth levels down, which the re-sort shares out
+        # (``tree.resort_stealing``): as many levels as keep them at least
+        # STEAL_MIN_SLOTS, at most STEAL_LEVELS
+        sub = n / max(len(self.subroots), 1)
+        self.steal_depth = int(min(STEAL_LEVELS, max(0, math.floor(math.log2(
+            max(sub / STEAL_MIN_SLOTS, 1.0))))))
+        below = [self._split_nodes(self.steal_depth, nd)[0] for nd in self.subroots]
+        self.below = np.zeros((len(below), max(len(b) for b in below)), np.int64)
+        self.nbelow = np.array([len(b) for b in below], np.int64)
+        for k, b in enumerate(below):
+            self.below[k, :len(b)] = b
+        self.steal_ctl = cache_aligned((len(below) * NLIST,), np.int64)
+        # the pair search's tasks (``tree.search_frontier``), claimed by the threads
+        self.search_max = max(self.leaf_size, n // (SEARCH_TASKS * self.threads))
+        self.stasks = np.zeros((4096, 3), np.int64)
+        self.sseg = np.zeros((4096, 3), np.int64)
+        self.sclaim = cache_aligned((8,), np.int64)
         parts = max(t, len(self.subroots))
         self.stacks = np.zeros((parts, 512), np.int64)
         self.order = np.zeros((parts, self.nnodes_cap), np.int64)
@@ -360,10 +391,11 @@ class Engine:
         ipar[K.I_CAP] = self.collapse_limit
         ipar[K.I_PAPER] = 1 if self.policy == "paper" else 0
 
-    def _split_nodes(self, depth):
-        """The nodes at ``depth`` (or leaves above it), left to right, and the nodes above."""
+    def _split_nodes(self, depth, root=0):
+        """The nodes ``depth`` levels below ``root`` (or leaves above them), left
+        to right, and the nodes above."""
         subroots, top = [], []
-        stack = [(0, 0)]
+        stack = [(root, 0)]
         while stack:
             nd, dep = stack.pop()
             left = int(self.ntop[nd, 0])
@@ -552,10 +584,12 @@ class Engine:
         if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
                   self.vids[0], self.stacks[0], self.nsplit, band, self.keys) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
-        res = self._pmap(resort, [(self.pos, self.perm, self.ntop, nd, -1, fresh,
-                                   self.vslots[k], self.vids[k], self.stacks[k], self.nsplit,
-                                   band, self.keys)
-                                  for k, nd in enumerate(self.subroots)])
+        self.steal_ctl[:] = 0
+        res = self._pmap(resort_stealing, [(k, self.pos, self.perm, self.ntop, nd,
+                                            self.steal_depth, fresh, self.vslots[k],
+                                            self.vids[k], self.stacks[k], self.nsplit, band,
+                                            self.keys, self.below, self.nbelow, self.steal_ctl)
+                                           for k, nd in enumerate(self.subroots)])
         if min(res) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
         arrays = [(permute_mat3, self.pos), (permute_mat3, self.vel), (permute_vec, self.rad),
@@ -583,12 +617,22 @@ class Engine:
                                            for k, nd in enumerate(self.subroots)])
             for nd in reversed(self.top_nodes):  # pre-order reversed: children first
                 bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)
-        parts = search_tasks(self.ntop, half, self.threads)
+        images = np.array([SELF_IMAGE] + [int(i) for i in half if i != SELF_IMAGE], np.int64)
         while True:
-            res = self._pmap(pair_search, [(self.anc, self.reach, self.ntop, self.nbox,
-                                            self.nreach, parts[k], img_pos, self.out_a[k],
-                                            self.out_e[k], self.stack2[k], self.search_work2[k])
-                                           for k in range(self.threads)])
+            nt = search_frontier(self.ntop, self.nbox, self.nreach, img_pos, images,
+                                 self.search_max, self.stasks, self.stack2[0])
+            if nt != -2:
+                break
+            self.stasks = np.zeros((2 * self.stasks.shape[0], 3), np.int64)
+            self.sseg = np.zeros_like(self.stasks)
+        if nt < 0:
+            raise SimulationError("pair search deeper than its work stack")
+        while True:
+            self.sclaim[0] = 0
+            res = self._pmap(pair_search_claimed, [
+                (self.anc, self.reach, self.ntop, self.nbox, self.nreach, self.stasks, nt,
+                 self.sclaim, img_pos, self.out_a[k], self.out_e[k], self.stack2[k],
+                 self.search_work2[k], self.sseg, k) for k in range(self.threads)])
             if min(res) < 0:
                 raise SimulationError("pair search deeper than its work stack")
             self.npairs_part[:] = res
@@ -601,7 +645,7 @@ class Engine:
         self.npairs = int(self.npairs_part.sum())
         self.search_visits += self.search_work2[:, 0].sum()
         self.search_tests += self.search_work2[:, 1].sum()
-        build_csr(n, self.npairs_part, self.out_a, self.out_e, self.noff, self.nent)
+        build_csr(n, self.sseg, nt, self.out_a, self.out_e, self.noff, self.nent)
         self._pmap(K.reset_step, [(self.tl[q], self.cis[q], self.xhead[q], self.ctr,
                                    self.hidden[q]) for q in sl])
 

@@ -23,20 +23,24 @@ NCTR = 8
 
 
 @kernel
-def build_csr(n, npairs, out_a, out_e, noff, nent):
-    """Symmetric CSR lists from the pair search's output, one row per search
-    part: ``out_a[p, :npairs[p]]``, ``out_e[p, :npairs[p]]``."""
+def build_csr(n, seg, nseg, out_a, out_e, noff, nent):
+    """Symmetric CSR lists from the pair search's output, read in segments:
+    segment q is ``out_a[p, f:f + c]``, ``out_e[p, f:f + c]`` with ``(p, f,
+    c) = seg[q]``, q = 0..nseg-1 (``tree.pair_search_claimed``'s tasks).
+    Each list holds its entries in segment order."""
     for i in range(n + 1):
         noff[i] = 0
-    for p in range(npairs.shape[0]):
-        for k in range(npairs[p]):
+    for q in range(nseg):
+        p = seg[q, 0]
+        for k in range(seg[q, 1], seg[q, 1] + seg[q, 2]):
             noff[out_a[p, k] + 1] += 1
             noff[(out_e[p, k] >> 5) + 1] += 1
     for i in range(n):
         noff[i + 1] += noff[i]
     # fill using noff[i] as i's cursor; afterwards noff[i] is i's end: shift back
-    for p in range(npairs.shape[0]):
-        for k in range(npairs[p]):
+    for q in range(nseg):
+        p = seg[q, 0]
+        for k in range(seg[q, 1], seg[q, 1] + seg[q, 2]):
             a = out_a[p, k]
             e = out_e[p, k]
             b = e >> 5

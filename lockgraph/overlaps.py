@@ -41,7 +41,7 @@ def max_overlap(state, domain):
         cap = m + 1024
     noff = np.zeros(n + 1, np.int64)
     nent = np.zeros(2 * m, np.int32)
-    build_csr(n, np.array([m], np.int64), out_a, out_e, noff, nent)
+    build_csr(n, np.array([[0, 0, m]], np.int64), 1, out_a, out_e, noff, nent)
     out = np.zeros(3, np.int64)
     worst = overlap_report(anc, rad, noff, nent, img_pos, OVERLAP_TOLERANCE, out)
     a = int(perm[out[0]]) if out[0] >= 0 else -1

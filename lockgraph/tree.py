@@ -27,7 +27,7 @@ Particles are stored in tree order: node ``k`` covers slots
 import numpy as np
 
 from ._jit import kernel
-from .atomics import fetch_max, float_bits
+from .atomics import cas, fetch_add, fetch_max, float_bits, load, store
 
 LEFT, RIGHT, START, END, PARENT, AXIS = 0, 1, 2, 3, 4, 5
 NTOP = 6
@@ -252,6 +252,71 @@ def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, d
         stack[sp + 2] = left
         stack[sp + 3] = depth + 1
         sp += 4
+    return 0
+
+
+# a list of ``resort_stealing``: its packed word (next slot from the front in
+# the low 32 bits, end from the back in the high), and on the next cache line
+# its state
+LIST_WORD, LIST_OPEN = 0, 8
+NLIST = 16
+
+
+@kernel(inline=True)
+def _take(ctl, at, front):
+    """Take an entry of the list whose packed word is ``ctl[at]``: its owner
+    from the front, another thread from the back (one CAS, so both ends never
+    take the same entry).  Returns the entry's index, -1 if none is left."""
+    while True:
+        w = load(ctl, at)
+        h = w & 0xFFFFFFFF
+        t = w >> 32
+        if h >= t:
+            return -1
+        if front:
+            k = h
+            nw = (h + 1) | (t << 32)
+        else:
+            k = t - 1
+            nw = h | (k << 32)
+        if cas(ctl, at, w, nw) == w:
+            return k
+
+
+@kernel
+def resort_stealing(me, pos, perm, ntop, root, depth, fresh, slots, ids, stack, nsplit, delta,
+                    keys, below, nbelow, ctl):
+    """``resort`` of subtree ``me`` (node ``root``), shared out while it runs.
+
+    The nodes of the subtree's top ``depth`` levels are re-sorted here; then
+    its list ``below[me, :nbelow[me]]`` (the nodes ``depth`` levels down) is
+    opened, and this call re-sorts them from the front while the calls of the
+    other subtrees, done with their own, take them from the back.  A list
+    not yet open when a call looks is left to its owner, so no call ever
+    waits.  The nodes are disjoint slot ranges and each is re-sorted whole
+    by one call, so the result is ``resort`` of the subtree, whoever took
+    what.  ``ctl`` (NLIST words a list, zero at the start): the packed word
+    and the state (1 open, -1 failed).  Scratch arrays as ``resort``, this
+    call's own.  Returns 0, or -1 if ``stack`` was short.
+    """
+    at = me * NLIST
+    if resort(pos, perm, ntop, root, depth, fresh, slots, ids, stack, nsplit, delta, keys) < 0:
+        store(ctl, at + LIST_OPEN, -1)
+        return -1
+    store(ctl, at + LIST_WORD, nbelow[me] << 32)
+    store(ctl, at + LIST_OPEN, 1)  # after the levels above: a taker sees them done
+    nl = below.shape[0]
+    for r in range(nl):
+        k = (me + r) % nl
+        if r > 0 and load(ctl, k * NLIST + LIST_OPEN) != 1:
+            continue
+        while True:
+            q = _take(ctl, k * NLIST + LIST_WORD, r == 0)
+            if q < 0:
+                break
+            if resort(pos, perm, ntop, below[k, q], -1, fresh, slots, ids, stack, nsplit, delta,
+                      keys) < 0:
+                return -1
     return 0
 
 
@@ -643,16 +708,7 @@ def pair_search(anc, reach, ntop, nbox, nreach, tasks, img_pos, out_a, out_e, st
                                 out_e[count] = (b << 5) | img
                             count += 1
             else:
-                ra = ntop[na, RIGHT]
-                for c in range(3):
-                    stack[sp + c, 2] = img
-                stack[sp, 0] = la
-                stack[sp, 1] = la
-                stack[sp + 1, 0] = la
-                stack[sp + 1, 1] = ra
-                stack[sp + 2, 0] = ra
-                stack[sp + 2, 1] = ra
-                sp += 3
+                sp = _push_children(ntop, nbox, stack, sp, na, nb, img)
             continue
         ox = img_pos[img, 0]
         oy = img_pos[img, 1]
@@ -677,26 +733,138 @@ def pair_search(anc, reach, ntop, nbox, nreach, tasks, img_pos, out_a, out_e, st
                             out_e[count] = (b << 5) | img
                         count += 1
             continue
-        split_a = lb < 0
-        if la >= 0 and lb >= 0:
-            ea = max(nbox[na, 3] - nbox[na, 0], nbox[na, 4] - nbox[na, 1],
-                     nbox[na, 5] - nbox[na, 2])
-            eb = max(nbox[nb, 3] - nbox[nb, 0], nbox[nb, 4] - nbox[nb, 1],
-                     nbox[nb, 5] - nbox[nb, 2])
-            split_a = ea >= eb
-        stack[sp, 2] = img
-        stack[sp + 1, 2] = img
-        if split_a:
-            stack[sp, 0] = la
-            stack[sp, 1] = nb
-            stack[sp + 1, 0] = ntop[na, RIGHT]
-            stack[sp + 1, 1] = nb
+        sp = _push_children(ntop, nbox, stack, sp, na, nb, img)
+    work[0] = visits
+    work[1] = tests
+    return count
+
+
+@kernel(inline=True)
+def _push_children(ntop, nbox, stack, sp, na, nb, img):
+    """The pair search's step down from the node pair (na, nb) in image img
+    (not two leaves): the same node's two halves and the pair between them,
+    else the larger box's halves (the inner one's if the other is a leaf),
+    pushed at ``stack[sp:]``; returns the new stack size."""
+    la = ntop[na, LEFT]
+    lb = ntop[nb, LEFT]
+    if img == SELF_IMAGE and na == nb:
+        ra = ntop[na, RIGHT]
+        for c in range(3):
+            stack[sp + c, 2] = img
+        stack[sp, 0] = la
+        stack[sp, 1] = la
+        stack[sp + 1, 0] = la
+        stack[sp + 1, 1] = ra
+        stack[sp + 2, 0] = ra
+        stack[sp + 2, 1] = ra
+        return sp + 3
+    split_a = lb < 0
+    if la >= 0 and lb >= 0:
+        ea = max(nbox[na, 3] - nbox[na, 0], nbox[na, 4] - nbox[na, 1],
+                 nbox[na, 5] - nbox[na, 2])
+        eb = max(nbox[nb, 3] - nbox[nb, 0], nbox[nb, 4] - nbox[nb, 1],
+                 nbox[nb, 5] - nbox[nb, 2])
+        split_a = ea >= eb
+    stack[sp, 2] = img
+    stack[sp + 1, 2] = img
+    if split_a:
+        stack[sp, 0] = la
+        stack[sp, 1] = nb
+        stack[sp + 1, 0] = ntop[na, RIGHT]
+        stack[sp + 1, 1] = nb
+    else:
+        stack[sp, 0] = na
+        stack[sp, 1] = lb
+        stack[sp + 1, 0] = na
+        stack[sp + 1, 1] = ntop[nb, RIGHT]
+    return sp + 2
+
+
+@kernel
+def search_frontier(ntop, nbox, nreach, img_pos, images, max_size, tasks, stack):
+    """Tasks of the claimed pair search: the two-argument recursion of
+    ``pair_search`` from (root, root, img) for each image in ``images`` (the
+    self image and one of each pair of opposite images, as ``search_tasks``),
+    stepped down until both nodes of a pair hold at most ``max_size`` slots
+    (or are leaves); pairs of nodes out of each other's reach are dropped.
+    The searches below the tasks, together, find each candidate pair once, in
+    the orientation ``pair_search`` from the root gives it.
+
+    ``tasks`` (M, 3) int64 receives (node a, node b, image) in the
+    recursion's order (neighbouring tasks cover neighbouring space);
+    ``stack`` is an (M', 3) int64 work array.  Returns the number of tasks,
+    -1 if ``stack`` was short, -2 if ``tasks`` was.
+    """
+    if images.shape[0] + 3 > stack.shape[0]:
+        return -1
+    sp = 0
+    for q in range(images.shape[0]):
+        stack[sp, 0] = 0
+        stack[sp, 1] = 0
+        stack[sp, 2] = images[q]
+        sp += 1
+    nt = 0
+    while sp > 0:
+        sp -= 1
+        na = stack[sp, 0]
+        nb = stack[sp, 1]
+        img = stack[sp, 2]
+        if sp + 3 > stack.shape[0]:
+            return -1
+        diag = img == SELF_IMAGE and na == nb
+        if not diag:
+            r = nreach[na] + nreach[nb]
+            if _box_gap2(nbox, na, nb, img_pos[img, 0], img_pos[img, 1], img_pos[img, 2]) > r * r:
+                continue
+        la = ntop[na, LEFT]
+        lb = ntop[nb, LEFT]
+        small = (ntop[na, END] - ntop[na, START] <= max_size
+                 and ntop[nb, END] - ntop[nb, START] <= max_size)
+        if small or (la < 0 and lb < 0) or (diag and la < 0):
+            if nt >= tasks.shape[0]:
+                return -2
+            tasks[nt, 0] = na
+            tasks[nt, 1] = nb
+            tasks[nt, 2] = img
+            nt += 1
         else:
-            stack[sp, 0] = na
-            stack[sp, 1] = lb
-            stack[sp + 1, 0] = na
-            stack[sp + 1, 1] = ntop[nb, RIGHT]
-        sp += 2
+            sp = _push_children(ntop, nbox, stack, sp, na, nb, img)
+    return nt
+
+
+@kernel
+def pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos, out_a,
+                        out_e, stack, work, seg, me):
+    """One thread's share of a pair search over ``tasks[:ntasks]`` (from
+    ``search_frontier``): it claims the next task with an atomic fetch-add on
+    ``claim[0]`` (start at 0) until none is left, so a thread slowed down
+    (another guest on its core) takes fewer.  Task q's pairs go to this
+    thread's ``out_a``, ``out_e`` (as ``pair_search``), and ``seg[q] = (me,
+    first, count)`` says where: ``build_csr`` reads them in task order, so
+    the lists do not depend on which thread ran which task.  Returns this
+    thread's pair count (stored or not, as ``pair_search``), or -1 if
+    ``stack`` was short (the other threads then stop too).  ``work`` as
+    ``pair_search``, summed over the thread's tasks."""
+    cap = out_a.shape[0]
+    count = 0
+    visits = 0.0
+    tests = 0.0
+    while True:
+        q = fetch_add(claim, 0, 1)
+        if q >= ntasks:
+            break
+        first = min(count, cap)
+        m = pair_search(anc, reach, ntop, nbox, nreach, tasks[q:q + 1], img_pos, out_a[first:],
+                        out_e[first:], stack, work)
+        if m < 0:
+            store(claim, 0, ntasks)
+            return -1
+        visits += work[0]
+        tests += work[1]
+        seg[q, 0] = me
+        seg[q, 1] = count
+        seg[q, 2] = m
+        count += m
     work[0] = visits
     work[1] = tests
     return count

@@ -17,8 +17,47 @@ from lockgraph.domains import Dish, PeriodicCube, ShearingSheet
 from lockgraph.tree import build, count_nodes, node_bounds, pair_search, search_tasks
 
 
-def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
-    """Candidate pairs from the tree, as a set of (lower id, higher id, image from lower)."""
+def claimed_search(anc, reach, ntop, nbox, nreach, img_pos, half, max_size, cap, threads=1):
+    """The engine's pair search: ``search_frontier``'s tasks claimed by
+    ``threads`` threads (``pair_search_claimed``), then ``build_csr``.
+    Returns (pairs found, per thread (out_a, out_e), segments, task count,
+    noff, nent)."""
+    import threading
+
+    from lockgraph.neighbors import build_csr
+    from lockgraph.tree import SELF_IMAGE, pair_search_claimed, search_frontier
+    images = np.array([SELF_IMAGE] + [i for i in half if i != SELF_IMAGE], np.int64)
+    tasks = np.zeros((4096, 3), np.int64)
+    nt = search_frontier(ntop, nbox, nreach, img_pos, images, max_size, tasks,
+                         np.zeros((4096, 3), np.int64))
+    assert nt > 0
+    seg = np.full((nt, 3), -1, np.int64)
+    claim = np.zeros(8, np.int64)
+    out = [(np.zeros(cap, np.int32), np.zeros(cap, np.int32)) for _ in range(threads)]
+    res = [None] * threads
+
+    def run(k):
+        res[k] = pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, nt, claim, img_pos,
+                                     out[k][0], out[k][1], np.zeros((4096, 3), np.int64),
+                                     np.zeros(2), seg, k)
+    pool = [threading.Thread(target=run, args=(k,)) for k in range(threads)]
+    for th in pool:
+        th.start()
+    for th in pool:
+        th.join()
+    m = sum(res)
+    n = len(anc)
+    noff, nent = np.zeros(n + 1, np.int64), np.zeros(2 * max(m, 1), np.int32)
+    if max(res) <= cap:
+        build_csr(n, seg, nt, np.array([o[0] for o in out]), np.array([o[1] for o in out]),
+                  noff, nent)
+    return res, out, seg, nt, noff, nent
+
+
+def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8, claimed=None):
+    """Candidate pairs from the tree, as a set of (lower id, higher id, image
+    from lower): ``pair_search`` from the root, or with ``claimed`` (a node
+    size) the engine's claimed search over tasks of nodes that small."""
     n = len(pos)
     perm = np.arange(n, dtype=np.int32)
     ntop = np.zeros((count_nodes(n, leaf), 6), np.int32)
@@ -31,12 +70,22 @@ def tree_pairs(pos, rad, sig, domain, time=0.0, fr=1.0, leaf=8):
     node_bounds(anc, reach, ntop, nn, nbox, nreach)
     img_pos, img_vel, half, full = domain.images(time)
     cap = 16
-    while True:
+    while claimed is None:
         out_a = np.zeros(cap, np.int32)
         out_e = np.zeros(cap, np.int32)
         m = pair_search(anc, reach, ntop, nbox, nreach, search_tasks(ntop, half, 1)[0], img_pos,
                         out_a, out_e, np.zeros((4096, 3), np.int64), np.zeros(2))
         if m <= cap:
+            break
+        cap = m
+    while claimed is not None:
+        res, out, seg, nt, _, _ = claimed_search(anc, reach, ntop, nbox, nreach, img_pos, half,
+                                                 claimed, cap)
+        m = res[0]
+        if m <= cap:  # the pairs in task order
+            out_a = np.concatenate([out[0][0][f:f + c] for _, f, c in seg[:nt]] + [[]])
+            out_e = np.concatenate([out[0][1][f:f + c] for _, f, c in seg[:nt]] + [[]])
+            out_a, out_e = out_a.astype(np.int64), out_e.astype(np.int64)
             break
         cap = m
     found = []
@@ -65,8 +114,14 @@ def brute_pairs(pos, rad, sig, domain, time=0.0, fr=1.0):
     return out
 
 
+_CASES = {}
+
+
 class PairSearchChecks:
-    """Reused for every variant: subclasses define ``system(seed)``."""
+    """Reused for every variant: subclasses define ``system(seed)``.  Each
+    system is searched from the root (``pair_search``) and as the engine
+    does, over claimed tasks (``search_frontier``, ``pair_search_claimed``)
+    of nodes of at most 8 (leaves) or 40 slots."""
     seeds = range(6)
     fr = 1.0
     time = 0.0
@@ -74,12 +129,16 @@ class PairSearchChecks:
     def system(self, seed):
         raise NotImplementedError
 
-    @pytest.fixture(params=seeds)
+    @pytest.fixture(params=[(seed, how) for seed in seeds for how in (None, 8, 40)],
+                    ids=lambda p: f"{p[0]}-{'root' if p[1] is None else f'tasks{p[1]}'}")
     def case(self, request):
-        pos, rad, sig, domain = self.system(request.param)
-        found = tree_pairs(pos, rad, sig, domain, self.time, self.fr)
-        truth = brute_pairs(pos, rad, sig, domain, self.time, self.fr)
-        return found, truth
+        seed, claimed = request.param
+        key = (type(self).__name__, seed, claimed)
+        if key not in _CASES:  # one search and brute force for the four checks
+            pos, rad, sig, domain = self.system(seed)
+            _CASES[key] = (tree_pairs(pos, rad, sig, domain, self.time, self.fr, claimed=claimed),
+                           brute_pairs(pos, rad, sig, domain, self.time, self.fr))
+        return _CASES[key]
 
     def test_sound(self, case):
         found, truth = case
@@ -279,3 +338,137 @@ def test_resort_moves_only_what_crossed(seed):
         assert _kd_ordered(pos, order, ntop, nn)
         moved[band] = np.count_nonzero(order != perm)
     assert 0 < 2 * moved[0.01] < moved[-1.0], moved
+
+
+def _searched_tree(n, seed, leaf=8):
+    """A tree over n random particles in a periodic cube, bounded: (anc, reach,
+    ntop, nbox, nreach, img_pos, half)."""
+    rng = np.random.default_rng(seed)
+    box = 20.0
+    pos = rng.uniform(-box / 2, box / 2, (n, 3))
+    rad = rng.uniform(0.05, 0.15, n)
+    perm = np.arange(n, dtype=np.int32)
+    ntop = np.zeros((count_nodes(n, leaf), 6), np.int32)
+    nn = build(pos.copy(), leaf, perm, ntop, np.zeros(256, np.int64))
+    anc, reach = pos[perm], (0.2 + rad)[perm]
+    nbox, nreach = np.zeros((nn, 6)), np.zeros(nn)
+    node_bounds(anc, reach, ntop, nn, nbox, nreach)
+    img_pos, _, half, _ = PeriodicCube(box).images(0.0)
+    return anc, reach, ntop, nbox, nreach, img_pos, half
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_claimed_search_lists_do_not_depend_on_the_threads(seed):
+    """Two threads claiming the tasks at once (nogil kernels) run every task
+    exactly once, and the candidate lists (``build_csr`` reads the tasks in
+    their order) are the ones one thread builds, entry for entry."""
+    tree = _searched_tree(6000, seed)
+    one = claimed_search(*tree, max_size=64, cap=200000)
+    two = claimed_search(*tree, max_size=64, cap=200000, threads=2)
+    nt = one[3]
+    assert nt == two[3] and nt > 50
+    seg = two[2]
+    assert set(seg[:, 0]) <= {0, 1} and (seg[:, 2] >= 0).all()  # every task run
+    assert sum(two[0]) == one[0][0]
+    for k in range(2):  # each thread's segments tile its output in claim order
+        mine = seg[seg[:, 0] == k]
+        mine = mine[np.argsort(mine[:, 1])]
+        assert (mine[:, 1] == np.concatenate([[0], np.cumsum(mine[:, 2])[:-1]])).all()
+        assert mine[:, 2].sum() == two[0][k]
+    assert np.array_equal(one[4], two[4]) and np.array_equal(one[5], two[5])
+
+
+def test_claimed_search_buffers_and_stack_short():
+    """Out of room: the count is still exact (the caller retries with larger
+    buffers); a stack too short says so (-1) and stops the other threads."""
+    from lockgraph.tree import SELF_IMAGE, pair_search_claimed, search_frontier
+    anc, reach, ntop, nbox, nreach, img_pos, half = _searched_tree(3000, 2)
+    full = claimed_search(anc, reach, ntop, nbox, nreach, img_pos, half, 64, 100000)[0][0]
+    assert claimed_search(anc, reach, ntop, nbox, nreach, img_pos, half, 64, 10)[0][0] == full
+    images = np.array([SELF_IMAGE] + [i for i in half if i != SELF_IMAGE], np.int64)
+    assert search_frontier(ntop, nbox, nreach, img_pos, images, 64, np.zeros((3, 3), np.int64),
+                           np.zeros((4096, 3), np.int64)) == -2
+    assert search_frontier(ntop, nbox, nreach, img_pos, images, 64, np.zeros((4096, 3), np.int64),
+                           np.zeros((2, 3), np.int64)) == -1
+    tasks = np.zeros((4096, 3), np.int64)
+    nt = search_frontier(ntop, nbox, nreach, img_pos, images, 64, tasks,
+                         np.zeros((4096, 3), np.int64))
+    claim = np.zeros(8, np.int64)
+    assert pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, nt, claim, img_pos,
+                               np.zeros(10, np.int32), np.zeros(10, np.int32),
+                               np.zeros((2, 3), np.int64), np.zeros(2),
+                               np.zeros((nt, 3), np.int64), 0) == -1
+    assert claim[0] == nt  # nothing left for the others
+
+
+def _stealing_setup(seed, depth):
+    """Last step's tree over moved particles (as ``_step_later``), its two
+    subtrees and their nodes ``depth`` levels down, for ``resort_stealing``."""
+    from lockgraph.tree import LEFT, NLIST, RIGHT, SMALL_NODE
+    pos, perm, ntop, nn, nsplit = _step_later(seed, n=16 * SMALL_NODE + 59, wrapped=5)
+    subroots = [int(ntop[0, LEFT]), int(ntop[0, RIGHT])]
+    below = []
+    for root in subroots:
+        level = [root]
+        for _ in range(depth):
+            level = [c for nd in level for c in ((int(ntop[nd, LEFT]), int(ntop[nd, RIGHT]))
+                                                 if ntop[nd, LEFT] >= 0 else (nd,))]
+        below.append(level)
+    width = max(map(len, below))
+    lists = np.zeros((2, width), np.int64)
+    for k, b in enumerate(below):
+        lists[k, :len(b)] = b
+    nbelow = np.array([len(b) for b in below], np.int64)
+    return pos, perm, ntop, nn, nsplit, subroots, lists, nbelow, np.zeros(2 * NLIST, np.int64)
+
+
+def _steal(me, pos, perm, ntop, subroots, nsplit, lists, nbelow, ctl, stack=256):
+    from lockgraph.tree import resort_stealing
+    return resort_stealing(me, pos, perm, ntop, subroots[me], 2, False, np.zeros(4096, np.int64),
+                           np.zeros(4096, np.int32), np.zeros(stack, np.int64), nsplit, 0.01,
+                           np.zeros(len(pos)), lists, nbelow, ctl)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_resort_stealing_is_resort(seed):
+    """``resort_stealing`` of the two subtrees (the top node re-sorted first),
+    run by two threads at once or one after the other, leaves the permutation
+    and split keys ``resort`` leaves, whoever took which node."""
+    import threading
+
+    from lockgraph.tree import LIST_OPEN, NLIST, resort
+    pos, perm0, ntop, nn, ns0, subroots, lists, nbelow, ctl = _stealing_setup(seed, 2)
+    args = (np.zeros(4096, np.int64), np.zeros(4096, np.int32), np.zeros(256, np.int64))
+    want_perm, want_ns = perm0.copy(), ns0.copy()
+    assert resort(pos, want_perm, ntop, 0, -1, False, *args, want_ns, 0.01, np.zeros(len(pos))) == 0
+    assert _kd_ordered(pos, want_perm, ntop, nn)
+    for concurrent in (False, True):
+        perm, ns = perm0.copy(), ns0.copy()
+        assert resort(pos, perm, ntop, 0, 1, False, *args, ns, 0.01, np.zeros(len(pos))) == 0
+        ctl[:] = 0
+        res = [None, None]
+
+        def run(me):
+            res[me] = _steal(me, pos, perm, ntop, subroots, ns, lists, nbelow, ctl)
+        if concurrent:
+            pool = [threading.Thread(target=run, args=(k,)) for k in range(2)]
+            for th in pool:
+                th.start()
+            for th in pool:
+                th.join()
+        else:
+            run(0)  # list 1 is not open yet: left to its owner
+            assert ctl[NLIST + LIST_OPEN] == 0
+            run(1)
+        assert res == [0, 0]
+        assert np.array_equal(perm, want_perm)
+        assert np.array_equal(ns, want_ns, equal_nan=True)
+
+
+def test_resort_stealing_stack_short():
+    """A work stack too short: -1, and the subtree's list is marked failed
+    (never opened), so no other thread takes from it."""
+    from lockgraph.tree import LIST_OPEN, NLIST
+    pos, perm, ntop, nn, ns, subroots, lists, nbelow, ctl = _stealing_setup(0, 2)
+    assert _steal(0, pos, perm, ntop, subroots, ns, lists, nbelow, ctl, stack=2) == -1
+    assert ctl[LIST_OPEN] == -1 and ctl[NLIST + LIST_OPEN] == 0
