@@ -92,6 +92,18 @@ def _anchor_and_bound(pos, anc, perm, reach, ntop, nd, nbox, nreach, order):
     subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
 
 
+def _top_and_reach(task, top, reach, reset):
+    """A step's first parallel phase.  Task 0: ``resort`` of the nodes above
+    the threads' subtrees (arguments ``top``), then the per-step arrays
+    cleared (``K.reset_step(*reset)``); returns resort's status.  Other
+    tasks: reaches of a slice of the particles (``_reach(*reach)``)."""
+    if task == 0:
+        ok = resort(*top)
+        K.reset_step(*reset)
+        return ok
+    return _reach(*reach)
+
+
 @kernel
 def _reach(pos, vel, rad, reach, par, extra, top):
     """Step-start reaches of a part of the particles (sliced arrays)."""
@@ -555,34 +567,54 @@ class Engine:
         touch or overlap now (for checking an input state).
         """
         n = self.n
-        sl = self._slices()
-        if touching_only:
-            self.reach[:] = self.rad
-        else:
-            K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
-            typical = float(np.median(self.speed_sample))
-            extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
-            self.par[K.P_EXTRA] = extra
-            tops = np.zeros((len(sl), 2))
-            self._pmap(_reach, [(self.pos[q], self.vel[q], self.rad[q], self.reach[q], self.par,
-                                 extra, tops[k]) for k, q in enumerate(sl)])
-            top = np.sort(tops.ravel())[::-1]
-            self.top[:] = top[:2]
-            if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
-                raise StepTooLargeError(
-                    f"dt={self.dt}: two particles' reaches ({self.top[0]:.4g} and "
-                    f"{self.top[1]:.4g} m) could span half the periodic box "
-                    f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
-            self.par[K.P_RMAX] = self.top[0]
         # the tree: a fresh one every rebuild_every steps, else last step's re-sorted
         # (each node re-split in a band about last step's split, twice the skin
         # distance wide: rebuild_node); the nodes above the threads' subtrees
         # first, then the subtrees in parallel
         fresh = self.since_build is None or self.since_build >= self.rebuild_every
         self.since_build = 0 if fresh else self.since_build + 1
-        band = 2.0 * float(self.par[K.P_EXTRA])
-        if resort(self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
-                  self.vids[0], self.stacks[0], self.nsplit, band, self.keys) < 0:
+        reset = (self.tl, self.cis, self.xhead, self.ctr, self.hidden)
+        if touching_only:
+            self.reach[:] = self.rad
+            band = 2.0 * float(self.par[K.P_EXTRA])
+            above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
+                     self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
+            ok = _top_and_reach(0, above, None, reset)
+        else:
+            K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
+            typical = float(np.median(self.speed_sample))
+            extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
+            self.par[K.P_EXTRA] = extra
+            band = 2.0 * extra
+            above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
+                     self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
+            # the nodes above the subtrees (one thread) beside the reaches (the
+            # others): neither reads what the other writes (ring N = 2e5, 0.3-0.5
+            # ms of re-sort that was one thread's alone)
+            m = max(self.threads - 1, 1)
+            q = [slice(n * k // m, n * (k + 1) // m) for k in range(m)]
+            tops = np.zeros((m, 2))
+            reach = [(self.pos[q[k]], self.vel[q[k]], self.rad[q[k]], self.reach[q[k]], self.par,
+                      extra, tops[k]) for k in range(m)]
+            if self.threads == 1:
+                _top_and_reach(1, None, reach[0], None)
+                ok = _top_and_reach(0, above, None, reset)
+            else:
+                ok = self._pmap(_top_and_reach, [(0, above, None, reset)] + [
+                    (1, None, r, None) for r in reach])[0]
+            top = np.sort(tops.ravel())[::-1]
+            self.top[:] = top[:2]
+            if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
+                # the storage order is still the particles': the re-sort started
+                # from the identity, and the next step builds a fresh tree
+                identity(self.perm, 0)
+                self.since_build = None
+                raise StepTooLargeError(
+                    f"dt={self.dt}: two particles' reaches ({self.top[0]:.4g} and "
+                    f"{self.top[1]:.4g} m) could span half the periodic box "
+                    f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
+            self.par[K.P_RMAX] = self.top[0]
+        if ok < 0:
             raise SimulationError("kD-tree deeper than its work stack")
         self.steal_ctl[:] = 0
         res = self._pmap(resort_stealing, [(k, self.pos, self.perm, self.ntop, nd,
@@ -646,8 +678,6 @@ class Engine:
         self.search_visits += self.search_work2[:, 0].sum()
         self.search_tests += self.search_work2[:, 1].sum()
         build_csr(n, self.sseg, nt, self.out_a, self.out_e, self.noff, self.nent)
-        self._pmap(K.reset_step, [(self.tl[q], self.cis[q], self.xhead[q], self.ctr,
-                                   self.hidden[q]) for q in sl])
 
     def _drift_phase(self):
         ph = self.physics

@@ -178,3 +178,26 @@ def test_physics_needs_its_parameters(tmp_path):
     path.write_text(text)
     with pytest.raises(ScenarioError, match=r"params\.e: unknown scenario key"):
         scenarios.load(str(path))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_step_too_large_leaves_the_state(threads):
+    """Two reaches that could span half the periodic box: the step is refused
+    (naming dt), the state is the step start's bit for bit, and the storage
+    order the particles' own (the re-sort of the nodes above the threads'
+    subtrees runs beside the reaches, before they are checked)."""
+    from lockgraph.engine import Engine
+    from lockgraph.errors import StepTooLargeError
+    g = (np.arange(4) - 1.5) * 2.5
+    pos = np.array([[x, y, z] for x in g for y in g for z in g])
+    vel = np.random.default_rng(0).normal(0.0, 0.1, pos.shape)
+    vel[[5, 40]] = [[20.0, 0, 0], [0, -20.0, 0]]
+    st = State(pos, vel, np.full(len(pos), 0.5), np.ones(len(pos)))
+    e = Engine(st.copy(), cube(10.0), 1.0, threads=threads)
+    for _ in range(2):
+        with pytest.raises(StepTooLargeError, match=r"dt=1\.0: two particles' reaches"):
+            e.step()
+        after = e.state()
+        assert np.array_equal(after.pos, st.pos) and np.array_equal(after.vel, st.vel)
+        assert np.array_equal(e.perm, np.arange(len(pos)))
+    e.close()
