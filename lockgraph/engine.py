@@ -50,8 +50,8 @@ BALANCE = 4
 # halves: a core of this machine is at times much slower than the other (the
 # same 5 ms task took 5.07 ms median, 6.73 ms p90 on one core; 5.00 / 5.39 on
 # the other), and a fixed half waits for it.  Ring N = 2e5, two threads, the
-# fixed halves and these stepping in turn (three runs, 12 steps each):
-# re-sort 13.3-14.3 -> 12.2-13.5 ms, pair search 11.0-13.2 -> 9.9-11.6 ms.
+# fixed halves and these stepping in turn in one process (three runs of 15
+# steps): search phase 30.6-31.6 -> 27.2-28.6 ms, step 38.6-40.0 -> 35.0-37.8.
 # Re-sort: each subtree's nodes this many levels down (at most) are taken by
 # whichever thread is free, but none smaller than STEAL_MIN_SLOTS slots (the
 # levels above stay with the subtree's thread: ring, 2.6 of 11.3 ms).
