@@ -23,6 +23,16 @@ ratio is what the machine gives two threads at that time) and the events
 (first predictions, queues and the events: the schedule's part), each as its
 median ms per step and its paired median speedup.
 
+What the host did meanwhile (this machine is a virtual one, sharing its
+cores): ``cores`` is this process's CPU time over the engine's timed steps
+divided by their wall time (a 2-thread engine's threads spin while they wait,
+so it reads about 2 unless a core was taken away: by another process, or by
+the hypervisor); ``steal %`` is the CPU time the hypervisor took from this
+machine while the engine's steps ran (``steal`` in /proc/stat, 10 ms ticks),
+as a share of the machine's CPU time, and ``(steps)`` how many of its steps
+lost any; ``paired unstolen`` is the paired median over the steps in which
+neither this engine nor the sequential one lost a tick.
+
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
 whichever measured cheaper per event; the last column counts the timed steps
@@ -82,6 +92,8 @@ from lockgraph import scenarios  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
+from host_probe import TWO_CORES, TwoCoreProbe  # noqa: E402
+
 CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish_marble": ("dish_marble", "late", 10001, 2001),
          "dish": ("dish", "late", 10000, 2000),
@@ -90,6 +102,7 @@ CASES = {"ring": ("ring", "early", 200000, 50000),
          "deep_bed": ("dish_marble", "late", 8701, 8701),
          "gas": ("gas", "early", 32000, 4000)}
 DEEP_BED_DROP = 0.08  # m
+NCPU = os.cpu_count()
 TARGET = 1.7
 
 
@@ -193,9 +206,26 @@ def dem_late(scene, n, code, presteps):
     return after_steps(add_marble(bed, p), sc.physics, p["dt"], presteps)
 
 
+def host_steal():
+    """CPU seconds the hypervisor has taken from this machine's CPUs so far (the
+    ``steal`` column of /proc/stat, all CPUs), or None where there is none."""
+    try:
+        with open("/proc/stat") as fh:
+            f = fh.readline().split()
+        return int(f[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def _on_one(eng):
     """Steps so far whose events ran on one thread, of a threaded engine."""
     return eng.scheduler.count[1] if eng.scheduler is not None else 0
+
+
+def _paired_where(seq, mine, seq_ok, my_ok):
+    """The median of seq[i] / mine[i] over the steps i where both are ok (nan if none)."""
+    r = [a / b for a, b, x, y in zip(seq, mine, seq_ok, my_ok) if x and y]
+    return statistics.median(r) if r else float("nan")
 
 
 def load_case(name, n, bed_code="lammps", bed_steps=100):
@@ -231,13 +261,29 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         walls = {k: [] for k in engines}
         per_step = {k: [] for k in engines}
         phases = {k: {"search": [], "events": []} for k in engines}  # per step
+        # per step: this process's CPU seconds, and the CPU seconds the host took
+        # from the machine (steal) while the step ran
+        cpu = {k: [] for k in engines}
+        stolen = {k: [] for k in engines}
+        # the host's two cores, probed before each step (host_probe): how much of
+        # the run the machine had two cores to give.  Per step it predicts
+        # little (the host switches within a second), so it is reported for
+        # the run, not used to pick steps
+        probe = TwoCoreProbe()
+        probes = []
         for r in range(repeats):
             for _ in range(steps):  # the engines take each step in turn
                 for label, eng in engines.items():
+                    probes.append(probe.measure())
                     ph0 = eng.phase_seconds
+                    s0 = host_steal()
+                    c0 = time.process_time()
                     t0 = time.perf_counter()
                     eng.step()
                     per_step[label].append(time.perf_counter() - t0)
+                    cpu[label].append(time.process_time() - c0)
+                    s1 = host_steal()
+                    stolen[label].append(s1 - s0 if s0 is not None else float("nan"))
                     ph1 = eng.phase_seconds
                     for k, v in phases[label].items():
                         v.append(ph1[k] - ph0[k])
@@ -245,10 +291,12 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 walls[label].append(sum(per_step[label][-steps:]) / steps)
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
                 f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items()))
+        probe.close()
         ref = engines["sequential"].state().sha256()
         seq = walls["sequential"]
         out = {"scene": scene, "state": state, "n": int(sc.state.n), "dt": float(sc.dt),
-               "steps": steps, "repeats": repeats, "runs": {}}
+               "steps": steps, "repeats": repeats, "runs": {},
+               "host_two_core_probes": probes}
         for label, eng in engines.items():
             d = eng.totals - base[label]
             ratios = [a / b for a, b in zip(seq, walls[label])]
@@ -267,6 +315,18 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 "phase_speedup_paired": {k: statistics.median(
                     a / b for a, b in zip(phases["sequential"][k], v) if b > 0)
                     for k, v in phases[label].items()},
+                # cores this process used while its steps ran (the pool's threads
+                # spin while they wait, so about T unless a core was taken away)
+                "cores_used": sum(cpu[label]) / sum(per_step[label]),
+                # the host's steal over this engine's steps, as a share of the
+                # machine's CPU time then (nan: not measurable here)
+                "steal_share": sum(stolen[label]) / (sum(per_step[label]) * NCPU),
+                "stolen_steps": sum(1 for x in stolen[label] if x > 0),
+                # the paired median over the steps in which the host took nothing
+                # from the machine, in this engine's step or the sequential one's
+                "speedup_paired_unstolen": _paired_where(
+                    per_step["sequential"], per_step[label],
+                    [x == 0 for x in stolen["sequential"]], [x == 0 for x in stolen[label]]),
                 "events_per_step": float(d[K.S_POPS]) / (steps * repeats),
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
@@ -288,7 +348,8 @@ def print_case(name, res):
     print(f"  {'engine':29s} {'ms/step':>9s} {'speedup':>8s} {'(median)':>9s} {'(paired)':>9s} "
           f"{'events/step':>12s} {'concurrency':>12s} {'viol.':>6s} {'repairs':>8s} "
           f"{'identical':>10s} {'regions':>8s} {'interior':>9s} {'on 1 thread':>12s} "
-          f"{'search ms (x)':>14s} {'events ms (x)':>14s}")
+          f"{'search ms (x)':>14s} {'events ms (x)':>14s} {'cores':>6s} {'steal %':>8s} "
+          f"{'(steps)':>8s} {'paired unstolen':>16s}")
     for label, r in res["runs"].items():
         lk = r.get("locks", {})
         print(f"  {label:29s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
@@ -298,7 +359,14 @@ def print_case(name, res):
               f"{lk.get('interior_fraction', float('nan')):9.2f} "
               f"{r.get('events_on_one_thread', 0):12d} "
               + " ".join(f"{r['phase_ms'][k]:7.1f} ({r['phase_speedup_paired'][k]:4.2f})"
-                         for k in ("search", "events")))
+                         for k in ("search", "events"))
+              + f" {r['cores_used']:6.2f} {100 * r['steal_share']:8.1f} "
+              f"{r['stolen_steps']:8d} {r['speedup_paired_unstolen']:16.2f}")
+    pr = res["host_two_core_probes"]
+    two = sum(1 for x in pr if x >= TWO_CORES)
+    print(f"  the host's two cores (host_probe, before each step): found by {two} of "
+          f"{len(pr)} probes ({100 * two / len(pr):.0f} %); the probe's 2-thread scaling: "
+          f"median {statistics.median(pr):.2f}, range {min(pr):.2f}-{max(pr):.2f}")
 
 
 def main():
@@ -330,7 +398,9 @@ def main():
               f"({best[1]['speedup_best'] / TARGET:.2f} of the target; paired median "
               f"{best[1]['speedup_paired']:.2f}x; its search phase, data-parallel, "
               f"{best[1]['phase_speedup_paired']['search']:.2f}x, its events "
-              f"{best[1]['phase_speedup_paired']['events']:.2f}x); all identical: "
+              f"{best[1]['phase_speedup_paired']['events']:.2f}x; {best[1]['cores_used']:.2f} "
+              f"cores used, the host's steal {100 * best[1]['steal_share']:.1f} % in "
+              f"{best[1]['stolen_steps']} of its steps); all identical: "
               f"{all(r['identical'] for r in res['runs'].values())}")
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
     if args.out:
