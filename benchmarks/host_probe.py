@@ -1,7 +1,7 @@
 """Does the host give this machine two cores right now?
 
-This machine is a virtual one.  Measured here (2026-12-04, ``memprobe`` runs
-of 60 s, no other process in the machine): a register-only loop ran on two
+This machine is a virtual one.  Measured here (2026-12-04, a probe script
+run for 60 s, no other process in the machine): a register-only loop ran on two
 threads at once at ~1.9 times one thread's rate in some stretches and at
 ~1.0 in others, switching within a second, while /proc/stat's ``steal``
 hardly moved and both threads had the full CPU time the guest kernel could

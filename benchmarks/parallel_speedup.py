@@ -31,7 +31,12 @@ the hypervisor); ``steal %`` is the CPU time the hypervisor took from this
 machine while the engine's steps ran (``steal`` in /proc/stat, 10 ms ticks),
 as a share of the machine's CPU time, and ``(steps)`` how many of its steps
 lost any; ``paired unstolen`` is the paired median over the steps in which
-neither this engine nor the sequential one lost a tick.
+neither this engine nor the sequential one lost a tick.  The host can also
+take a core, or memory bandwidth, without the guest seeing either: before
+every timed step ``host_probe`` runs a register-only loop and a memory-bound
+one on one thread and then on two, and each case ends with a line giving the
+two probes' median 2-thread scaling over the run (about 2: the host gave two
+threads twice the work; about 1: one thread's worth).
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
@@ -253,6 +258,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, lock=kind,
                                 scale=scale, policy="exact", schedule=schedule)
         engines[label].merge_far = merge
+    closing = []  # the host probe, once made
     try:
         for eng in engines.values():
             eng.step()
@@ -271,6 +277,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         # the run, not used to pick steps
         probe = TwoCoreProbe()
         probes = []
+        closing.append(probe)
         for r in range(repeats):
             for _ in range(steps):  # the engines take each step in turn
                 for label, eng in engines.items():
@@ -291,7 +298,6 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 walls[label].append(sum(per_step[label][-steps:]) / steps)
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
                 f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items()))
-        probe.close()
         ref = engines["sequential"].state().sha256()
         seq = walls["sequential"]
         out = {"scene": scene, "state": state, "n": int(sc.state.n), "dt": float(sc.dt),
@@ -340,6 +346,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     finally:
         for eng in engines.values():
             eng.close()
+        for p in closing:
+            p.close()
 
 
 def print_case(name, res):
