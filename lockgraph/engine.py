@@ -2,7 +2,8 @@
 
 A step of length dt:
 
-1. half kick of Hill's equations (shearing sheet only);
+1. half kick of Hill's equations (shearing sheet only; done in the same
+   pass as the search radii, after a speed sample of the kicked velocities);
 2. search radii, kD-tree over the step-start positions (the *anchors*),
    particles re-stored in tree order, candidate pairs by two-argument recursion;
 3. every particle's first event predicted; events processed strictly in
@@ -14,7 +15,8 @@ A step of length dt:
 If a step cannot finish (an internal pool is full, inelastic collapse, a
 search radius larger than the periodic box allows) the drift phase is undone
 from the anchors and the undo journal, so the state is exactly what it was
-after the first half kick; errors then also undo that kick.
+after the first half kick; errors then also undo that kick (to rounding:
+the inverse rotation is not exact, a few ulps of the velocities).
 """
 import itertools
 import math
@@ -61,6 +63,8 @@ STEAL_MIN_SLOTS = 1024
 # slots at most, and the pairs between them), claimed in the recursion's order.
 SEARCH_TASKS = 32
 PH_SEARCH, PH_EVENTS, PH_STEP = range(3)  # Engine.phase_s
+# the per-particle arrays the storage permutation moves (Engine._permute)
+PERMUTED = ("pos", "vel", "rad", "mass", "ncoll", "ids", "reach")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
                 K.STALL: "stall"}
@@ -92,21 +96,31 @@ def _anchor_and_bound(pos, anc, perm, reach, ntop, nd, nbox, nreach, order):
     subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
 
 
-def _top_and_reach(task, top, reach, reset):
-    """A step's first parallel phase.  Task 0: ``resort`` of the nodes above
-    the threads' subtrees (arguments ``top``), then the per-step arrays
-    cleared (``K.reset_step(*reset)``); returns resort's status.  Other
-    tasks: reaches of a slice of the particles (``_reach(*reach)``)."""
-    if task == 0:
+def _top_and_reach(top, reset, reach):
+    """A step's first parallel phase, one thread's share: (``top`` not None)
+    ``resort`` of the nodes above the threads' subtrees, then the per-step
+    arrays cleared (``K.reset_step(*reset)``); then (``reach`` not None) the
+    step's first half kick and the reaches of a slice of the particles
+    (``_reach(*reach)``).  Returns (resort's status or 0, (start, seconds
+    on the nodes above, seconds on the slice)) (``Shares``)."""
+    ok = 0
+    t0 = time.perf_counter()
+    if top is not None:
         ok = resort(*top)
         K.reset_step(*reset)
-        return ok
-    return _reach(*reach)
+    t1 = time.perf_counter()
+    if reach is not None:
+        _reach(*reach)
+    return ok, (t0, t1 - t0, time.perf_counter() - t1)
 
 
 @kernel
-def _reach(pos, vel, rad, reach, par, extra, top):
-    """Step-start reaches of a part of the particles (sliced arrays)."""
+def _reach(pos, vel, rad, reach, par, extra, top, omega, h):
+    """A slice of the particles (sliced arrays): Hill's kick for time h
+    (``omega`` and h nonzero: the step's first half kick), then their
+    step-start reaches."""
+    if omega != 0.0 and h != 0.0:
+        kick_hill(pos, vel, omega, h)
     K.compute_reach(pos, vel, rad, reach, par, extra, top)
 
 
@@ -114,8 +128,53 @@ def _permute_some(arrays, perm, scratch):
     """Apply the storage permutation to a few arrays (one thread's share);
     ``scratch`` (N,) float64 is the gather buffer, seen as each array's type."""
     n = perm.shape[0]
-    for fn, arr in arrays:
-        fn(arr, perm, scratch.view(arr.dtype)[:n])
+    for arr in arrays:
+        (permute_mat3 if arr.ndim == 2 else permute_vec)(arr, perm, scratch.view(arr.dtype)[:n])
+
+
+class Shares:
+    """Slices of N particles for a phase of T fixed tasks (one a thread, the
+    last on the calling thread), sized so that the tasks end together as
+    they ran last time: each task's late start (a pool thread starts after
+    the caller, which posts the tasks and hands over the GIL), its work
+    before its slice (``extra``: the top nodes' re-sort) and the rate at
+    which slices went.  Which thread works on which particle changes no
+    result: the passes are particle by particle."""
+
+    def __init__(self, t):
+        self.t = t
+        self.last = None  # (cut, starts, extras, spans)
+
+    def cuts(self, n):
+        """T + 1 slot cuts."""
+        t = self.t
+        share = np.ones(t)
+        if t > 1 and self.last is not None:
+            cut, starts, extra, spans = self.last
+            rate = sum(spans) / max(cut[-1], 1)  # seconds a particle
+            if rate > 0.0:
+                lead = np.asarray(starts) - min(starts) + np.asarray(extra)
+                on = np.ones(t, bool)  # tasks given a slice
+                while True:  # when those end together; none for a task past it
+                    end = (cut[-1] * rate + lead[on].sum()) / on.sum()
+                    late = on & (lead >= end)
+                    if not late.any():
+                        break
+                    on &= ~late
+                share = np.where(on, end - lead, 0.0) / rate
+        w = np.concatenate([[0.0], np.cumsum(share)])
+        return [int(round(n * x / w[-1])) for x in w]
+
+    def record(self, cut, out):
+        """``out``: each task's (start, extra seconds, seconds on its slice)."""
+        self.last = (cut, [o[0] for o in out], [o[1] for o in out], [o[2] for o in out])
+
+
+def _finish_slice(*args):
+    """``_finish(*args)`` timed for ``Shares``: (start, 0, seconds)."""
+    t0 = time.perf_counter()
+    _finish(*args)
+    return t0, 0.0, time.perf_counter() - t0
 
 
 class Engine:
@@ -330,6 +389,9 @@ class Engine:
         self.stacks = np.zeros((parts, 512), np.int64)
         self.order = np.zeros((parts, self.nnodes_cap), np.int64)
         self.scratches = np.zeros((t, n))  # gather buffers of the permutation (8 bytes)
+        # the slices of the step's first phase (kick and reaches) and of its end
+        self._reach_shares, self._finish_shares = Shares(t), Shares(t)
+        self._kick = 0.0  # s: Hill's kick pending for the step's first phase (_setup)
         self.nbox = np.zeros((self.nnodes_cap, 6))
         self.nsplit = np.full(self.nnodes_cap, np.nan)  # split keys (resort)
         self.nreach = np.zeros(self.nnodes_cap)
@@ -506,7 +568,10 @@ class Engine:
     def _step(self, check_end):
         ph = self.physics
         hill = ph.hill
-        if hill is not None:
+        # the first half kick: in the step's first phase (_setup), unless
+        # asleep grains are held first (their velocities set before the kick)
+        self._kick = 0.5 * self.dt if hill is not None and not self.sleeping else 0.0
+        if hill is not None and self._kick == 0.0:
             self._pmap(kick_hill, [(self.pos[q], self.vel[q], hill.omega, 0.5 * self.dt)
                                    for q in self._slices()])
         if self.sleeping:
@@ -516,12 +581,14 @@ class Engine:
         try:
             st = self._drift_phase()
         except BaseException:
-            if hill is not None:
+            if hill is not None and self._kick == 0.0:  # kicked: undone
                 kick_hill(self.pos, self.vel, hill.omega, -0.5 * self.dt)
+            self._kick = 0.0
             if self.sleeping:
                 K.hold_sleepers(self.vel, self.tlast, 0.0)
             raise
         sl = self._slices()
+        cut = self._finish_shares.cuts(self.n)
         if check_end:  # the overlaps at the step end, before leaving the frame
             self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt)
                                      for q in sl])
@@ -530,11 +597,12 @@ class Engine:
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
-        self._pmap(_finish, [(self.pos[q], self.vel[q], self.tl[q], self.dt, ph.g,
-                              ph.domain.code, wp, hill.omega if hill is not None else 0.0,
-                              not check_end, self.tlast[q] if self.sleeping else NO_SLEEP,
-                              self.time, self.par[K.P_TSLEEP], self.par[K.P_VSLEEP])
-                             for q in sl])
+        out = self._pmap(_finish_slice, [
+            (self.pos[a:b], self.vel[a:b], self.tl[a:b], self.dt, ph.g, ph.domain.code, wp,
+             hill.omega if hill is not None else 0.0, not check_end,
+             self.tlast[a:b] if self.sleeping else NO_SLEEP, self.time,
+             self.par[K.P_TSLEEP], self.par[K.P_VSLEEP]) for a, b in zip(cut, cut[1:])])
+        self._finish_shares.record(cut, out)
         if self.workers is not None:
             self.workers.rest()
         self._accumulate(st)
@@ -564,7 +632,12 @@ class Engine:
         """Search radii, tree, storage order, candidate lists, first events.
 
         ``touching_only``: search radii zero, so the lists hold the pairs that
-        touch or overlap now (for checking an input state).
+        touch or overlap now (for checking an input state).  A pending kick
+        (``self._kick``, s: the step's first half kick) is applied in the
+        first phase, beside the re-sort of the top nodes rather than in a
+        pass of its own, and is then no longer pending (a redo of the step
+        starts from the kicked state); the speed sample sees the kicked
+        velocities.
         """
         n = self.n
         # the tree: a fresh one every rebuild_every steps, else last step's re-sorted
@@ -579,29 +652,41 @@ class Engine:
             band = 2.0 * float(self.par[K.P_EXTRA])
             above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
                      self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
-            ok = _top_and_reach(0, above, None, reset)
+            ok = _top_and_reach(above, reset, None)[0]
         else:
-            K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
+            kick = self._kick if n > 0 else 0.0
+            omega = self.physics.hill.omega if kick != 0.0 else 0.0
+            if kick != 0.0:  # the sample's rows kicked (a copy): the same values
+                rows = np.minimum(np.arange(self.speed_sample.shape[0])
+                                  * max(1, n // self.speed_sample.shape[0]), n - 1)
+                sp, sv = self.pos[rows], self.vel[rows]
+                kick_hill(sp, sv, omega, kick)
+                K.sample_speeds(sp, sv, self.par, self.speed_sample)
+            else:
+                K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra
             band = 2.0 * extra
             above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
                      self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
-            # the nodes above the subtrees (one thread) beside the reaches (the
-            # others): neither reads what the other writes (ring N = 2e5, 0.3-0.5
-            # ms of re-sort that was one thread's alone)
-            m = max(self.threads - 1, 1)
-            q = [slice(n * k // m, n * (k + 1) // m) for k in range(m)]
-            tops = np.zeros((m, 2))
-            reach = [(self.pos[q[k]], self.vel[q[k]], self.rad[q[k]], self.reach[q[k]], self.par,
-                      extra, tops[k]) for k in range(m)]
-            if self.threads == 1:
-                _top_and_reach(1, None, reach[0], None)
-                ok = _top_and_reach(0, above, None, reset)
-            else:
-                ok = self._pmap(_top_and_reach, [(0, above, None, reset)] + [
-                    (1, None, r, None) for r in reach])[0]
+            # the nodes above the subtrees (the last task: the calling thread,
+            # which starts first) beside the kick and the reaches (every task,
+            # the last a smaller share): the re-sort reads positions only, the
+            # kick writes velocities only (ring N = 2e5, 0.3-0.5 ms of re-sort
+            # that was one thread's alone).  Shares as measured last step
+            # (``Shares``); fixed tasks, not claimed, so that an interrupt
+            # leaves every particle kicked or none.
+            t = self.threads
+            cut = self._reach_shares.cuts(n)
+            tops = np.zeros((t, 2))
+            self._kick = 0.0  # applied now (an interrupt in a task waits for them all)
+            out = self._pmap(_top_and_reach, [
+                (above if k == t - 1 else None, reset if k == t - 1 else None,
+                 (self.pos[a:b], self.vel[a:b], self.rad[a:b], self.reach[a:b], self.par, extra,
+                  tops[k], omega, kick)) for k, (a, b) in enumerate(zip(cut, cut[1:]))])
+            ok = out[-1][0]
+            self._reach_shares.record(cut, [o[1] for o in out])
             top = np.sort(tops.ravel())[::-1]
             self.top[:] = top[:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
@@ -624,18 +709,7 @@ class Engine:
                                            for k, nd in enumerate(self.subroots)])
         if min(res) < 0:
             raise SimulationError("kD-tree deeper than its work stack")
-        arrays = [(permute_mat3, self.pos), (permute_mat3, self.vel), (permute_vec, self.rad),
-                  (permute_vec, self.mass), (permute_vec, self.ncoll), (permute_vec, self.ids),
-                  (permute_vec, self.reach)]
-        if self.guarded:
-            arrays.append((permute_vec, self.tlast))
-        t = self.threads
-        if self.balance > 0:  # one array a task, the claiming thread's gather buffer
-            self._claimed(_permute_some, len(arrays),
-                          lambda i, k: ([arrays[i]], self.perm, self.scratches[k]))
-        else:
-            self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
-                                       for k in range(min(t, len(arrays)))])
+        self._permute()
         nnodes = self.nnodes
         if self.threads == 1:
             identity(self.perm, 0)
@@ -678,6 +752,26 @@ class Engine:
         self.search_visits += self.search_work2[:, 0].sum()
         self.search_tests += self.search_work2[:, 1].sum()
         build_csr(n, self.sseg, nt, self.out_a, self.out_e, self.noff, self.nent)
+
+    def _permute(self):
+        """Apply the storage permutation ``perm`` to every per-particle array
+        that keeps its values across steps, in place through each thread's
+        gather buffer.
+
+        Why in place: gathering into spare arrays and swapping them in halves
+        the memory traffic (ring N = 2e5, one thread, the seven arrays: 4.1
+        ms in place, 3.3 ms into spares) but holds ~80 more bytes a particle,
+        past the ring's 200-byte target."""
+        arrays = [getattr(self, nm) for nm in PERMUTED]
+        if self.guarded:
+            arrays.append(self.tlast)
+        t = self.threads
+        if self.balance > 0:  # one array a task, the claiming thread's gather buffer
+            self._claimed(_permute_some, len(arrays),
+                          lambda i, k: ([arrays[i]], self.perm, self.scratches[k]))
+        else:
+            self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
+                                       for k in range(min(t, len(arrays)))])
 
     def _drift_phase(self):
         ph = self.physics

@@ -779,14 +779,13 @@ class Workers:
         dlo, dhi, dtour_t, dtour_s = doms
         pc = pctl.reshape(-1)
         npc = pctl.shape[1]
-        for d in range(len(dlo)):
-            t = dtour_t[d][1] if dtour_s[d][1] >= 0 else np.inf
-            row = pctl[d]
-            row[:PHIGH] = 0
-            row[PCLOCK] = np.float64(t).view(np.int64)
-            row[PINFL] = np.float64(np.inf).view(np.int64)
-            row[POWNER] = -1
-            row[PSETTLE] = 0
+        nd = len(dlo)  # each domain's row, all at once (a loop cost ~0.1 ms at 16)
+        clock = np.where(dtour_s[:, 1] >= 0, dtour_t[:, 1], np.inf)
+        pctl[:nd, :PHIGH] = 0
+        pctl[:nd, PCLOCK] = clock.view(np.int64)
+        pctl[:nd, PINFL] = np.float64(np.inf).view(np.int64)
+        pctl[:nd, POWNER] = -1
+        pctl[:nd, PSETTLE] = 0
         if isinstance(self.fault, tuple) and self.fault[0] == "stall":
             pctl[0, POWNER] = 1 << 20  # taken before any worker can (hold_until_abort)
         tctl = cache_aligned((self.threads * NTCTL,), np.int64)
