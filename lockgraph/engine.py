@@ -587,11 +587,10 @@ class Engine:
             if self.sleeping:
                 K.hold_sleepers(self.vel, self.tlast, 0.0)
             raise
-        sl = self._slices()
         cut = self._finish_shares.cuts(self.n)
         if check_end:  # the overlaps at the step end, before leaving the frame
             self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt)
-                                     for q in sl])
+                                     for q in self._slices()])
             ov = K.max_overlap(self.pos, self.rad, self.noff, self.nent, self.xhead, self.xent,
                                self.xnext, self._img_pos, self._img_vel, self.dt)
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
@@ -656,14 +655,7 @@ class Engine:
         else:
             kick = self._kick if n > 0 else 0.0
             omega = self.physics.hill.omega if kick != 0.0 else 0.0
-            if kick != 0.0:  # the sample's rows kicked (a copy): the same values
-                rows = np.minimum(np.arange(self.speed_sample.shape[0])
-                                  * max(1, n // self.speed_sample.shape[0]), n - 1)
-                sp, sv = self.pos[rows], self.vel[rows]
-                kick_hill(sp, sv, omega, kick)
-                K.sample_speeds(sp, sv, self.par, self.speed_sample)
-            else:
-                K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample)
+            K.sample_speeds(self.pos, self.vel, self.par, self.speed_sample, omega, kick)
             typical = float(np.median(self.speed_sample))
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra

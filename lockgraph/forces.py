@@ -49,16 +49,28 @@ class Hill:
         object.__setattr__(self, "omega", _finite_positive("hill.omega", self.omega))
 
 
+@kernel(inline=True)
+def hill_coefficients(omega, h):
+    """(cos 2 omega h, sin 2 omega h, 3 omega / 2, omega^2 h): ``hill_kicked``'s."""
+    return (math.cos(2.0 * omega * h), math.sin(2.0 * omega * h), 1.5 * omega,
+            omega * omega * h)
+
+
+@kernel(inline=True)
+def hill_kicked(pos, vel, i, coef):
+    """Particle i's velocity after Hill's accelerations for time h with its
+    position frozen, as (vx, vy, vz); ``coef = hill_coefficients(omega, h)``.
+    ``kick_hill`` applies it to every particle, so whatever else needs a
+    kicked velocity gets the same bits."""
+    c, s, shear, zk = coef
+    vx = vel[i, 0]
+    w = vel[i, 1] + shear * pos[i, 0]
+    return vx * c + w * s, (w * c - vx * s) - shear * pos[i, 0], vel[i, 2] - zk * pos[i, 2]
+
+
 @kernel
 def kick_hill(pos, vel, omega, h):
     """Apply Hill's accelerations for time h with positions frozen (in place)."""
-    c = math.cos(2.0 * omega * h)
-    s = math.sin(2.0 * omega * h)
-    shear = 1.5 * omega
-    zk = omega * omega * h
+    coef = hill_coefficients(omega, h)
     for i in range(pos.shape[0]):
-        vx = vel[i, 0]
-        w = vel[i, 1] + shear * pos[i, 0]
-        vel[i, 0] = vx * c + w * s
-        vel[i, 1] = (w * c - vx * s) - shear * pos[i, 0]
-        vel[i, 2] -= zk * pos[i, 2]
+        vel[i, 0], vel[i, 1], vel[i, 2] = hill_kicked(pos, vel, i, coef)

@@ -49,6 +49,7 @@ import math
 import numpy as np
 from ._jit import kernel
 
+from .forces import hill_coefficients, hill_kicked
 from .events import CYLINDER, FLOOR, NONE, update_queue, update_queue_pair, build_queue
 from .atomics import cycles, fetch_add, fetch_max, float_bits, load, store
 from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
@@ -795,16 +796,22 @@ def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, trace, max_ev
 
 
 @kernel
-def sample_speeds(pos, vel, par, out):
-    """Speeds relative to the shear flow of every (N // len(out))-th particle."""
+def sample_speeds(pos, vel, par, out, omega, h):
+    """Speeds relative to the shear flow of every (N // len(out))-th particle;
+    with ``omega`` and h nonzero, of its velocity after Hill's kick for time
+    h (``forces.hill_kicked``: the kick not yet applied, the same values)."""
     n = pos.shape[0]
     m = out.shape[0]
     stride = max(1, n // m)
     s = par[P_SHEAR]
+    coef = hill_coefficients(omega, h)
     for q in range(m):
         i = min(q * stride, n - 1)
-        uy = vel[i, 1] + s * pos[i, 0]
-        out[q] = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])
+        vx, vy, vz = vel[i, 0], vel[i, 1], vel[i, 2]
+        if omega != 0.0 and h != 0.0:
+            vx, vy, vz = hill_kicked(pos, vel, i, coef)
+        uy = vy + s * pos[i, 0]
+        out[q] = math.sqrt(vx * vx + uy * uy + vz * vz)
 
 
 @kernel
