@@ -27,9 +27,10 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domain, pool_state
-from .parallel import (INTERIOR, Workers, cache_aligned, classify_ranges, classify_regions,
-                       cycles_per_second)
+from .atomics import cpu_relax, fetch_add, load, store
+from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state
+from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
+                       classify_regions, cycles_per_second)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -63,11 +64,17 @@ STEAL_MIN_SLOTS = 1024
 # slots at most, and the pairs between them), claimed in the recursion's order.
 SEARCH_TASKS = 32
 PH_SEARCH, PH_EVENTS, PH_STEP = range(3)  # Engine.phase_s
-# the per-particle arrays the storage permutation moves (Engine._permute)
-PERMUTED = ("pos", "vel", "rad", "mass", "ncoll", "ids", "reach")
+# the per-particle arrays the storage permutation moves, in the order of its
+# tasks (``_permute_share``; then ``tlast`` when guarded)
+PERMUTED = ("pos", "vel", "rad", "mass", "ncoll", "reach", "ids")
 STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "pool overflow",
                 K.COLLAPSE: "collapse", K.SIGMA_TOO_LARGE: "sigma too large", K.CHUNK: "chunk", K.NEED_LOG: "need log", K.VIOLATION: "violation",
                 K.STALL: "stall"}
+
+# chunks a thread of the per-particle passes (the first phase's, the step
+# end), claimed: a thread that starts late, or does other work first (the
+# top nodes' re-sort), takes fewer
+CHUNKS = 16
 
 
 @kernel
@@ -86,95 +93,164 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep, v_
         kick_hill(pos, vel, omega, 0.5 * dt)
 
 
-def _anchor_and_bound(pos, anc, perm, reach, ntop, nd, nbox, nreach, order):
-    """One thread's subtree: the permutation of its slots back to the
-    identity, anchors (step-start positions) of its particles, then the
-    bounds of its nodes."""
-    lo, hi = int(ntop[nd, START]), int(ntop[nd, END])
-    identity(perm[lo:hi], lo)
-    K.copy_rows(anc[lo:hi], pos[lo:hi])
-    subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order)
+@kernel
+def _finish_claimed(nthr, ctl, pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep,
+                    v_sleep):
+    """One thread's share of the step end (``_finish``): chunks of the
+    particles claimed with an atomic fetch-add on ``ctl[0]`` (0 at the
+    start) until none is left, so that the threads end together however
+    late each started."""
+    n = pos.shape[0]
+    nchunks = CHUNKS * nthr
+    while True:
+        q = fetch_add(ctl, 0, 1)
+        if q >= nchunks:
+            return 0
+        lo = n * q // nchunks
+        hi = n * (q + 1) // nchunks
+        _finish(pos[lo:hi], vel[lo:hi], tl[lo:hi], dt, g, code, wp, omega, drift, slp[lo:hi],
+                t_end, t_sleep, v_sleep)  # slp empty (no sleeping grains): its slice too
 
 
-def _top_and_reach(top, reset, reach):
-    """A step's first parallel phase, one thread's share: (``top`` not None)
-    ``resort`` of the nodes above the threads' subtrees, then the per-step
-    arrays cleared (``K.reset_step(*reset)``); then (``reach`` not None) the
-    step's first half kick and the reaches of a slice of the particles
-    (``_reach(*reach)``).  Returns (resort's status or 0, (start, seconds
-    on the nodes above, seconds on the slice)) (``Shares``)."""
-    ok = 0
-    t0 = time.perf_counter()
-    if top is not None:
-        ok = resort(*top)
-        K.reset_step(*reset)
-    t1 = time.perf_counter()
-    if reach is not None:
-        _reach(*reach)
-    return ok, (t0, t1 - t0, time.perf_counter() - t1)
+# words of the first phase's control array (``_first_phase``): the re-sort of
+# the nodes above the subtrees done (1) or failed (-1); the next chunk; on
+# cache lines of their own
+TOP_DONE, NEXT_CHUNK = 0, 8
+NFIRST = 16
+
+
+@kernel(inline=True)
+def _merge_top(top, r0, r1):
+    """top[0] >= top[1]: the two largest of them and r0 >= r1."""
+    for r in (r0, r1):
+        if r > top[0]:
+            top[1] = top[0]
+            top[0] = r
+        elif r > top[1]:
+            top[1] = r
 
 
 @kernel
-def _reach(pos, vel, rad, reach, par, extra, top, omega, h):
-    """A slice of the particles (sliced arrays): Hill's kick for time h
-    (``omega`` and h nonzero: the step's first half kick), then their
-    step-start reaches."""
-    if omega != 0.0 and h != 0.0:
-        kick_hill(pos, vel, omega, h)
-    K.compute_reach(pos, vel, rad, reach, par, extra, top)
+def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h, reaches, tops,
+                 tl, cis, xhead, ctr, hidden, perm, ntop, depth_split, fresh, vslots, vids,
+                 stacks, nsplit, band, keys, subroots, steal_depth, below, nbelow, steal_ctl):
+    """Thread ``me`` of ``nthr`` (the last one the calling thread) in a step's
+    first phase.
+
+    The last thread re-sorts the nodes above the threads' subtrees (``depth_split``
+    levels, ``tree.resort``) while the others start on the per-particle
+    passes; then every thread claims chunks of the particles (``ctl``'s
+    NEXT_CHUNK) and clears their per-step arrays (``K.reset_step``) and,
+    with ``reaches``, gives them Hill's kick for time h (omega and h
+    nonzero: the step's first half kick) and their step-start reaches
+    (``K.compute_reach``), the two largest of which go to ``tops[me, :2]``;
+    then, once the top nodes are done, re-sorts its subtrees
+    (``tree.resort_stealing``: subtrees me, me + nthr, ...).  One call a
+    thread and claimed chunks: the top nodes' re-sort takes 0.3-1.0 ms a
+    step (ring N = 2e5), so fixed shares sized from the last step left one
+    thread idle for a tenth of the phase.  Every chunk is claimed by a call
+    that runs to its end, so no particle is left unkicked.  Returns 0, or -1
+    if a work stack was short (or ``ctrl`` ABORT was set while waiting)."""
+    n = pos.shape[0]
+    if me == nthr - 1:
+        ok = resort(pos, perm, ntop, 0, depth_split, fresh, vslots[me], vids[me], stacks[me],
+                    nsplit, band, keys)
+        store(ctl, TOP_DONE, 1 if ok >= 0 else -1)
+    top = tops[me]
+    top[0] = 0.0
+    top[1] = 0.0
+    nchunks = CHUNKS * nthr
+    while True:
+        q = fetch_add(ctl, NEXT_CHUNK, 1)
+        if q >= nchunks:
+            break
+        lo = n * q // nchunks
+        hi = n * (q + 1) // nchunks
+        K.reset_step(tl[lo:hi], cis[lo:hi], xhead[lo:hi], ctr, hidden[lo:hi])
+        if reaches:
+            if omega != 0.0 and h != 0.0:
+                kick_hill(pos[lo:hi], vel[lo:hi], omega, h)
+            K.compute_reach(pos[lo:hi], vel[lo:hi], rad[lo:hi], reach[lo:hi], par, extra,
+                            top[2:4])
+            _merge_top(top, top[2], top[3])
+    while load(ctl, TOP_DONE) == 0:
+        if load(ctrl, ABORT) != 0:
+            return -1
+        cpu_relax()
+    if load(ctl, TOP_DONE) < 0:
+        return -1
+    for k in range(me, subroots.shape[0], nthr):
+        if resort_stealing(k, pos, perm, ntop, subroots[k], steal_depth, fresh, vslots[k],
+                           vids[k], stacks[k], nsplit, band, keys, below, nbelow,
+                           steal_ctl) < 0:
+            return -1
+    return 0
 
 
-def _permute_some(arrays, perm, scratch):
-    """Apply the storage permutation to a few arrays (one thread's share);
-    ``scratch`` (N,) float64 is the gather buffer, seen as each array's type."""
+@kernel
+def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf):
+    """Thread ``me`` of ``nthr``'s share of the storage permutation
+    (``Engine._permute``), an array a task (``PERMUTED``, and ``tlast`` if it
+    is per particle): with ``claim`` (one word, 0 at the
+    start) the next task is claimed with an atomic fetch-add, so a thread
+    slowed down takes fewer; with an empty ``claim``, tasks me, me + nthr,
+    ...  ``buf`` (N,) float64 is this thread's gather buffer, seen as each
+    array's type."""
     n = perm.shape[0]
-    for arr in arrays:
-        (permute_mat3 if arr.ndim == 2 else permute_vec)(arr, perm, scratch.view(arr.dtype)[:n])
+    ntasks = 8 if tlast.shape[0] == n else 7
+    r = 0
+    while True:
+        if claim.shape[0] > 0:
+            q = fetch_add(claim, 0, 1)
+        else:
+            q = me + r * nthr
+            r += 1
+        if q >= ntasks:
+            return 0
+        # the largest first and the smallest (4 bytes) last, so that the
+        # threads' last tasks end close together
+        if q == 0:
+            permute_mat3(pos, perm, buf)
+        elif q == 1:
+            permute_mat3(vel, perm, buf)
+        elif q == 2:
+            permute_vec(rad, perm, buf)
+        elif q == 3:
+            permute_vec(mass, perm, buf)
+        elif q == 4:
+            permute_vec(ncoll, perm, buf.view(np.int64))
+        elif q == 5:
+            permute_vec(reach, perm, buf)
+        elif q == ntasks - 1:
+            permute_vec(ids, perm, buf.view(np.int32)[:n])
+        else:
+            permute_vec(tlast, perm, buf)
 
 
-class Shares:
-    """Slices of N particles for a phase of T fixed tasks (one a thread, the
-    last on the calling thread), sized so that the tasks end together as
-    they ran last time: each task's late start (a pool thread starts after
-    the caller, which posts the tasks and hands over the GIL), its work
-    before its slice (``extra``: the top nodes' re-sort) and the rate at
-    which slices went.  Which thread works on which particle changes no
-    result: the passes are particle by particle."""
-
-    def __init__(self, t):
-        self.t = t
-        self.last = None  # (cut, starts, extras, spans)
-
-    def cuts(self, n):
-        """T + 1 slot cuts."""
-        t = self.t
-        share = np.ones(t)
-        if t > 1 and self.last is not None:
-            cut, starts, extra, spans = self.last
-            rate = sum(spans) / max(cut[-1], 1)  # seconds a particle
-            if rate > 0.0:
-                lead = np.asarray(starts) - min(starts) + np.asarray(extra)
-                on = np.ones(t, bool)  # tasks given a slice
-                while True:  # when those end together; none for a task past it
-                    end = (cut[-1] * rate + lead[on].sum()) / on.sum()
-                    late = on & (lead >= end)
-                    if not late.any():
-                        break
-                    on &= ~late
-                share = np.where(on, end - lead, 0.0) / rate
-        w = np.concatenate([[0.0], np.cumsum(share)])
-        return [int(round(n * x / w[-1])) for x in w]
-
-    def record(self, cut, out):
-        """``out``: each task's (start, extra seconds, seconds on its slice)."""
-        self.last = (cut, [o[0] for o in out], [o[1] for o in out], [o[2] for o in out])
-
-
-def _finish_slice(*args):
-    """``_finish(*args)`` timed for ``Shares``: (start, 0, seconds)."""
-    t0 = time.perf_counter()
-    _finish(*args)
-    return t0, 0.0, time.perf_counter() - t0
+@kernel
+def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, ncoll, ids, reach,
+                        tlast, perm, buf, anc, ntop, subroots, nbox, nreach, order):
+    """Thread ``me`` of ``nthr``: its share of the storage permutation
+    (``_permute_share``); then, once every thread is done with it (``arrived``:
+    one word, 0 at the start), for its subtrees (me, me + nthr, ...) the
+    permutation of their slots back to the identity, the anchors (step-start
+    positions) of their particles and the bounds of their nodes.  One call,
+    not a phase each: a phase's hand-over to the pool thread and back costs
+    0.1-0.2 ms.  Returns 0, or -1 if ``ctrl`` ABORT was set while waiting."""
+    _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf)
+    fetch_add(arrived, 0, 1)
+    while load(arrived, 0) < nthr:
+        if load(ctrl, ABORT) != 0:
+            return -1
+        cpu_relax()
+    for k in range(me, subroots.shape[0], nthr):
+        nd = subroots[k]
+        lo = ntop[nd, START]
+        hi = ntop[nd, END]
+        identity(perm[lo:hi], lo)
+        K.copy_rows(anc[lo:hi], pos[lo:hi])
+        subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order[k])
+    return 0
 
 
 class Engine:
@@ -368,6 +444,7 @@ class Engine:
         # the subtrees the threads re-sort and bound (2^depth of them), and the nodes above
         self.depth_split = max(0, math.ceil(math.log2(t))) if t > 1 else 0
         self.subroots, self.top_nodes = self._split_nodes(self.depth_split)
+        self.subroot_arr = np.array(self.subroots, np.int64)
         # each subtree's nodes steal_depth levels down, which the re-sort shares out
         # (``tree.resort_stealing``): as many levels as keep them at least
         # STEAL_MIN_SLOTS, at most STEAL_LEVELS
@@ -390,7 +467,6 @@ class Engine:
         self.order = np.zeros((parts, self.nnodes_cap), np.int64)
         self.scratches = np.zeros((t, n))  # gather buffers of the permutation (8 bytes)
         # the slices of the step's first phase (kick and reaches) and of its end
-        self._reach_shares, self._finish_shares = Shares(t), Shares(t)
         self._kick = 0.0  # s: Hill's kick pending for the step's first phase (_setup)
         self.nbox = np.zeros((self.nnodes_cap, 6))
         self.nsplit = np.full(self.nnodes_cap, np.nan)  # split keys (resort)
@@ -566,6 +642,8 @@ class Engine:
             self.phase_s[PH_STEP] += time.perf_counter() - step0
 
     def _step(self, check_end):
+        if self.workers is not None:
+            self.workers.wake()
         ph = self.physics
         hill = ph.hill
         # the first half kick: in the step's first phase (_setup), unless
@@ -587,7 +665,6 @@ class Engine:
             if self.sleeping:
                 K.hold_sleepers(self.vel, self.tlast, 0.0)
             raise
-        cut = self._finish_shares.cuts(self.n)
         if check_end:  # the overlaps at the step end, before leaving the frame
             self._pmap(K.drift_all, [(self.pos[q], self.vel[q], self.tl[q], self.dt)
                                      for q in self._slices()])
@@ -596,12 +673,12 @@ class Engine:
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
-        out = self._pmap(_finish_slice, [
-            (self.pos[a:b], self.vel[a:b], self.tl[a:b], self.dt, ph.g, ph.domain.code, wp,
+        ctl = cache_aligned((8,), np.int64)
+        self._pmap(_finish_claimed, [
+            (self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
              hill.omega if hill is not None else 0.0, not check_end,
-             self.tlast[a:b] if self.sleeping else NO_SLEEP, self.time,
-             self.par[K.P_TSLEEP], self.par[K.P_VSLEEP]) for a, b in zip(cut, cut[1:])])
-        self._finish_shares.record(cut, out)
+             self.tlast if self.sleeping else NO_SLEEP, self.time, self.par[K.P_TSLEEP],
+             self.par[K.P_VSLEEP])] * self.threads)
         if self.workers is not None:
             self.workers.rest()
         self._accumulate(st)
@@ -645,13 +722,11 @@ class Engine:
         # first, then the subtrees in parallel
         fresh = self.since_build is None or self.since_build >= self.rebuild_every
         self.since_build = 0 if fresh else self.since_build + 1
-        reset = (self.tl, self.cis, self.xhead, self.ctr, self.hidden)
+        t = self.threads
         if touching_only:
             self.reach[:] = self.rad
             band = 2.0 * float(self.par[K.P_EXTRA])
-            above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
-                     self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
-            ok = _top_and_reach(above, reset, None)[0]
+            kick = omega = extra = 0.0
         else:
             kick = self._kick if n > 0 else 0.0
             omega = self.physics.hill.omega if kick != 0.0 else 0.0
@@ -660,30 +735,30 @@ class Engine:
             extra = self.skin * typical * self.dt + 0.5 * self.par[K.P_G] * self.dt ** 2
             self.par[K.P_EXTRA] = extra
             band = 2.0 * extra
-            above = (self.pos, self.perm, self.ntop, 0, self.depth_split, fresh, self.vslots[0],
-                     self.vids[0], self.stacks[0], self.nsplit, band, self.keys)
-            # the nodes above the subtrees (the last task: the calling thread,
-            # which starts first) beside the kick and the reaches (every task,
-            # the last a smaller share): the re-sort reads positions only, the
-            # kick writes velocities only (ring N = 2e5, 0.3-0.5 ms of re-sort
-            # that was one thread's alone).  Shares as measured last step
-            # (``Shares``); fixed tasks, not claimed, so that an interrupt
-            # leaves every particle kicked or none.
-            t = self.threads
-            cut = self._reach_shares.cuts(n)
-            tops = np.zeros((t, 2))
-            self._kick = 0.0  # applied now (an interrupt in a task waits for them all)
-            out = self._pmap(_top_and_reach, [
-                (above if k == t - 1 else None, reset if k == t - 1 else None,
-                 (self.pos[a:b], self.vel[a:b], self.rad[a:b], self.reach[a:b], self.par, extra,
-                  tops[k], omega, kick)) for k, (a, b) in enumerate(zip(cut, cut[1:]))])
-            ok = out[-1][0]
-            self._reach_shares.record(cut, [o[1] for o in out])
-            top = np.sort(tops.ravel())[::-1]
-            self.top[:] = top[:2]
+        # the nodes above the subtrees, then the subtrees, beside the kick, the
+        # reaches and the clearing of the per-step arrays (``_first_phase``)
+        ctl = cache_aligned((NFIRST,), np.int64)
+        tops = np.zeros((t, 4))
+        self.steal_ctl[:] = 0
+        if self.workers is not None:
+            self.workers.ctrl[ABORT] = 0
+        ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
+        self._kick = 0.0  # applied now: every chunk is claimed by a call that ends
+        res = self._pmap(_first_phase, [
+            (k, t, ctl, ctrl, self.pos, self.vel, self.rad, self.reach, self.par, extra, omega,
+             kick, not touching_only, tops, self.tl, self.cis, self.xhead, self.ctr, self.hidden,
+             self.perm, self.ntop, self.depth_split, fresh, self.vslots, self.vids, self.stacks,
+             self.nsplit, band, self.keys, self.subroot_arr, self.steal_depth, self.below,
+             self.nbelow, self.steal_ctl) for k in range(t)])
+        if min(res) < 0:
+            identity(self.perm, 0)  # the storage order is still the particles'
+            self.since_build = None
+            raise SimulationError("kD-tree deeper than its work stack")
+        if not touching_only:
+            self.top[:] = np.sort(tops[:, :2].ravel())[::-1][:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
-                # the storage order is still the particles': the re-sort started
-                # from the identity, and the next step builds a fresh tree
+                # the re-sort is not applied yet: the storage order is still
+                # the particles', and the next step builds a fresh tree
                 identity(self.perm, 0)
                 self.since_build = None
                 raise StepTooLargeError(
@@ -691,28 +766,26 @@ class Engine:
                     f"{self.top[1]:.4g} m) could span half the periodic box "
                     f"({self.par[K.P_HALFPER]:.4g} m); use a smaller dt or a larger box")
             self.par[K.P_RMAX] = self.top[0]
-        if ok < 0:
-            raise SimulationError("kD-tree deeper than its work stack")
-        self.steal_ctl[:] = 0
-        res = self._pmap(resort_stealing, [(k, self.pos, self.perm, self.ntop, nd,
-                                            self.steal_depth, fresh, self.vslots[k],
-                                            self.vids[k], self.stacks[k], self.nsplit, band,
-                                            self.keys, self.below, self.nbelow, self.steal_ctl)
-                                           for k, nd in enumerate(self.subroots)])
-        if min(res) < 0:
-            raise SimulationError("kD-tree deeper than its work stack")
-        self._permute()
         nnodes = self.nnodes
         if self.threads == 1:
+            self._permute()
             identity(self.perm, 0)
             K.copy_rows(self.anc, self.pos)
             node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         else:
-            # each thread resets its subtree's slots of the permutation, anchors
-            # their particles, then bounds its nodes
-            self._pmap(_anchor_and_bound, [(self.pos, self.anc, self.perm, self.reach, self.ntop,
-                                            nd, self.nbox, self.nreach, self.order[k])
-                                           for k, nd in enumerate(self.subroots)])
+            # the permutation, then each thread's subtrees: the permutation of
+            # their slots back to the identity, anchors, bounds; then the nodes
+            # above them
+            arrived = cache_aligned((8,), np.int64)[:1]
+            claim = self._claim_word()
+            tlast = self.tlast if self.guarded else NO_SLEEP
+            ctrl = self.workers.ctrl
+            ctrl[ABORT] = 0
+            res = self._pmap(_permute_and_anchor, [
+                (k, t, claim, arrived, ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
+                 self.ids, self.reach, tlast, self.perm, self.scratches[k], self.anc, self.ntop,
+                 self.subroot_arr, self.nbox, self.nreach, self.order) for k in range(t)])
+            assert min(res) == 0  # ABORT is set only by a raise, which map raises
             for nd in reversed(self.top_nodes):  # pre-order reversed: children first
                 bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)
         images = np.array([SELF_IMAGE] + [int(i) for i in half if i != SELF_IMAGE], np.int64)
@@ -747,23 +820,23 @@ class Engine:
 
     def _permute(self):
         """Apply the storage permutation ``perm`` to every per-particle array
-        that keeps its values across steps, in place through each thread's
-        gather buffer.
+        that keeps its values across steps (``PERMUTED``, and ``tlast`` when
+        guarded), in place through a gather buffer (``_permute_share``; on
+        several threads, ``_permute_and_anchor``).
 
         Why in place: gathering into spare arrays and swapping them in halves
         the memory traffic (ring N = 2e5, one thread, the seven arrays: 4.1
         ms in place, 3.3 ms into spares) but holds ~80 more bytes a particle,
         past the ring's 200-byte target."""
-        arrays = [getattr(self, nm) for nm in PERMUTED]
-        if self.guarded:
-            arrays.append(self.tlast)
-        t = self.threads
-        if self.balance > 0:  # one array a task, the claiming thread's gather buffer
-            self._claimed(_permute_some, len(arrays),
-                          lambda i, k: ([arrays[i]], self.perm, self.scratches[k]))
-        else:
-            self._pmap(_permute_some, [(arrays[k::t], self.perm, self.scratches[k])
-                                       for k in range(min(t, len(arrays)))])
+        _permute_share(0, 1, np.zeros(0, np.int64), self.pos, self.vel, self.rad, self.mass,
+                       self.ncoll, self.ids, self.reach, self.tlast if self.guarded else NO_SLEEP,
+                       self.perm, self.scratches[0])
+
+    def _claim_word(self):
+        """A fresh claim counter for the kernels of a claimed phase
+        (``init_domains``, ``_permute_and_anchor``): one word at 0 on a cache line
+        of its own, or empty (fixed shares) when ``balance`` is 0."""
+        return cache_aligned((8,), np.int64)[:1] if self.balance > 0 else np.zeros(0, np.int64)
 
     def _drift_phase(self):
         ph = self.physics
@@ -809,9 +882,10 @@ class Engine:
                 if self.schedule == "pool":  # and the pool's words of the domain's slots
                     pst, locks = pool_state(self.n, nd, self.threads, self._pool_keep)
                     hops, wt, sdom = pst[:3]
-                    self._claimed(init_domain, nd, lambda d, k: (
-                        d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
-                        dtour_t[d], dtour_s[d]))
+                    claim = self._claim_word()
+                    self._pmap(init_domains, [
+                        (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
+                         dlo, dhi, dtour_t, dtour_s) for k in range(self.threads)])
                 else:
                     self._claimed(K.init_range, nd, lambda d, k: (
                         parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d], dtour_t[d],

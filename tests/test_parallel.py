@@ -659,40 +659,6 @@ def test_phase_seconds_split_each_step_and_count_a_failed_one(threads, schedule)
         eng.close()
 
 
-@pytest.mark.parametrize("t", [1, 2, 4])
-def test_shares_cut_every_particle_once_and_end_together(t):
-    """``Shares``: T + 1 cuts from 0 to N, never decreasing.  Equal slices
-    before anything is recorded; then slices for which the recorded late
-    starts, extra work and rate put every task's end at the same time
-    (within one particle's time, the rounding to whole particles)."""
-    from lockgraph.engine import Shares
-
-    n = 10_000
-    sh = Shares(t)
-    cut = sh.cuts(n)
-    assert cut[0] == 0 and cut[-1] == n and np.all(np.diff(cut) >= 0)
-    assert max(np.diff(cut)) - min(np.diff(cut)) <= 1
-    rate = 1e-7  # s a particle
-    starts = [2e-5 * k for k in range(t)]  # later tasks start later
-    extra = [0.0] * (t - 1) + [2e-4]  # the last task has work before its slice
-    sh.record(cut, [(s, x, rate * (b - a)) for s, x, a, b in zip(starts, extra, cut, cut[1:])])
-    cut = sh.cuts(n)
-    assert cut[0] == 0 and cut[-1] == n and np.all(np.diff(cut) >= 0)
-    ends = [s + x + rate * (b - a) for s, x, a, b in zip(starts, extra, cut, cut[1:])]
-    assert max(ends) - min(ends) <= 2 * rate
-
-
-def test_shares_give_a_task_nothing_rather_than_a_negative_slice():
-    """A task that started so late that the others can do all the work gets an
-    empty slice; the cuts still cover every particle once."""
-    from lockgraph.engine import Shares
-
-    sh = Shares(2)
-    cut = [0, 500, 1000]
-    sh.record(cut, [(1.0, 0.0, 5e-4), (0.0, 0.0, 5e-4)])  # task 0 began 1 s late
-    assert sh.cuts(1000) == [0, 0, 1000]
-
-
 @pytest.mark.parametrize("threads", [1, 2])
 def test_a_failed_hill_step_undoes_its_kick(threads):
     """The first half kick of a Hill's-equations step runs inside the step's
