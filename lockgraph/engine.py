@@ -27,7 +27,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .atomics import cpu_relax, fetch_add, load, store
+from .atomics import cpu_relax, fetch_add, load, sched_yield, store
 from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second)
@@ -120,6 +120,18 @@ NFIRST = 16
 
 
 @kernel(inline=True)
+def _pause_spin(spins):
+    """One look of a wait for another thread: a pause, and after 256 looks a
+    yield (with more threads than cores the one waited for may need this
+    core).  Returns the looks so far."""
+    if spins < 256:
+        cpu_relax()
+    else:
+        sched_yield()
+    return spins + 1
+
+
+@kernel(inline=True)
 def _merge_top(top, r0, r1):
     """top[0] >= top[1]: the two largest of them and r0 >= r1."""
     for r in (r0, r1):
@@ -173,10 +185,11 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
             K.compute_reach(pos[lo:hi], vel[lo:hi], rad[lo:hi], reach[lo:hi], par, extra,
                             top[2:4])
             _merge_top(top, top[2], top[3])
+    spins = 0
     while load(ctl, TOP_DONE) == 0:
         if load(ctrl, ABORT) != 0:
             return -1
-        cpu_relax()
+        spins = _pause_spin(spins)
     if load(ctl, TOP_DONE) < 0:
         return -1
     for k in range(me, subroots.shape[0], nthr):
@@ -239,10 +252,11 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
     0.1-0.2 ms.  Returns 0, or -1 if ``ctrl`` ABORT was set while waiting."""
     _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf)
     fetch_add(arrived, 0, 1)
+    spins = 0
     while load(arrived, 0) < nthr:
         if load(ctrl, ABORT) != 0:
             return -1
-        cpu_relax()
+        spins = _pause_spin(spins)
     for k in range(me, subroots.shape[0], nthr):
         nd = subroots[k]
         lo = ntop[nd, START]
@@ -466,7 +480,6 @@ class Engine:
         self.stacks = np.zeros((parts, 512), np.int64)
         self.order = np.zeros((parts, self.nnodes_cap), np.int64)
         self.scratches = np.zeros((t, n))  # gather buffers of the permutation (8 bytes)
-        # the slices of the step's first phase (kick and reaches) and of its end
         self._kick = 0.0  # s: Hill's kick pending for the step's first phase (_setup)
         self.nbox = np.zeros((self.nnodes_cap, 6))
         self.nsplit = np.full(self.nnodes_cap, np.nan)  # split keys (resort)

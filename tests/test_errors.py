@@ -184,8 +184,8 @@ def test_physics_needs_its_parameters(tmp_path):
 def test_step_too_large_leaves_the_state(threads):
     """Two reaches that could span half the periodic box: the step is refused
     (naming dt), the state is the step start's bit for bit, and the storage
-    order the particles' own (the re-sort of the nodes above the threads'
-    subtrees runs beside the reaches, before they are checked)."""
+    order the particles' own (the tree's re-sort runs in the same phase as
+    the reaches, before they are checked)."""
     from lockgraph.engine import Engine
     from lockgraph.errors import StepTooLargeError
     g = (np.arange(4) - 1.5) * 2.5

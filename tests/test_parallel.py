@@ -404,8 +404,18 @@ def test_pool_map_runs_every_task_and_raises_the_first_failure():
 def test_pool_runs_more_tasks_than_threads_and_sleeps_when_the_step_is_over():
     """More tasks than threads: each pool thread runs several, results in order.
     After ``rest()`` every pool thread goes to sleep (no spinning between
-    steps) and wakes for the next task; ``close()`` ends the threads."""
-    from lockgraph.parallel import NWSYNC, W_ASLEEP
+    steps) and wakes for the next task, or at ``wake()`` (a step begins) to
+    spin for it; ``close()`` ends the threads."""
+    from lockgraph.parallel import NWSYNC, W_ASLEEP, cycles_per_second
+
+    def asleep():
+        return [bool(w._sync[k * NWSYNC + W_ASLEEP]) for k in range(2)]
+
+    def wait_for(want, what):
+        t0 = time.perf_counter()
+        while asleep() != want:
+            assert time.perf_counter() - t0 < 5.0, what
+            time.sleep(0.001)
 
     w = Workers(2)
     try:
@@ -413,11 +423,17 @@ def test_pool_runs_more_tasks_than_threads_and_sleeps_when_the_step_is_over():
         w.inline_last = False
         assert w.map(lambda k: k + 1, [(k,) for k in range(5)]) == [1, 2, 3, 4, 5]
         w.rest()
-        t0 = time.perf_counter()
-        while not all(w._sync[k * NWSYNC + W_ASLEEP] for k in range(2)):
-            assert time.perf_counter() - t0 < 5.0, "pool threads still spinning after rest()"
-            time.sleep(0.001)
+        wait_for([True, True], "pool threads still spinning after rest()")
         assert w.map(lambda k: -k, [(1,), (2,)]) == [-1, -2]  # woken again
+        if not w.passive:
+            w.rest()
+            wait_for([True, True], "pool threads still spinning after rest()")
+            w._spin = int(60 * cycles_per_second())  # spins long enough to be seen
+            w.wake()
+            wait_for([False, False], "pool threads still asleep after wake()")
+            assert w.map(lambda k: k - 1, [(1,), (2,)]) == [0, 1]
+            w.rest()
+            wait_for([True, True], "pool threads still spinning after rest()")
     finally:
         w.close()
     w.close()
