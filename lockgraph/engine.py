@@ -30,7 +30,7 @@ from . import locks as L
 from .atomics import cpu_relax, fetch_add, load, sched_yield, store
 from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
-                       classify_regions, cycles_per_second)
+                       classify_regions, cycles_per_second, next_task)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -131,17 +131,6 @@ def _pause_spin(spins):
     return spins + 1
 
 
-@kernel(inline=True)
-def _merge_top(top, r0, r1):
-    """top[0] >= top[1]: the two largest of them and r0 >= r1."""
-    for r in (r0, r1):
-        if r > top[0]:
-            top[1] = top[0]
-            top[0] = r
-        elif r > top[1]:
-            top[1] = r
-
-
 @kernel
 def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h, reaches, tops,
                  tl, cis, xhead, ctr, hidden, perm, ntop, depth_split, fresh, vslots, vids,
@@ -155,7 +144,7 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     NEXT_CHUNK) and clears their per-step arrays (``K.reset_step``) and,
     with ``reaches``, gives them Hill's kick for time h (omega and h
     nonzero: the step's first half kick) and their step-start reaches
-    (``K.compute_reach``), the two largest of which go to ``tops[me, :2]``;
+    (``K.compute_reach``), the two largest of which go to ``tops[me]``;
     then, once the top nodes are done, re-sorts its subtrees
     (``tree.resort_stealing``: subtrees me, me + nthr, ...).  One call a
     thread and claimed chunks: the top nodes' re-sort takes 0.3-1.0 ms a
@@ -168,9 +157,7 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
         ok = resort(pos, perm, ntop, 0, depth_split, fresh, vslots[me], vids[me], stacks[me],
                     nsplit, band, keys)
         store(ctl, TOP_DONE, 1 if ok >= 0 else -1)
-    top = tops[me]
-    top[0] = 0.0
-    top[1] = 0.0
+    top = tops[me]  # zeros: compute_reach takes in each chunk's reaches
     nchunks = CHUNKS * nthr
     while True:
         q = fetch_add(ctl, NEXT_CHUNK, 1)
@@ -183,8 +170,7 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
             if omega != 0.0 and h != 0.0:
                 kick_hill(pos[lo:hi], vel[lo:hi], omega, h)
             K.compute_reach(pos[lo:hi], vel[lo:hi], rad[lo:hi], reach[lo:hi], par, extra,
-                            top[2:4])
-            _merge_top(top, top[2], top[3])
+                            top)
     spins = 0
     while load(ctl, TOP_DONE) == 0:
         if load(ctrl, ABORT) != 0:
@@ -204,20 +190,14 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
 def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf):
     """Thread ``me`` of ``nthr``'s share of the storage permutation
     (``Engine._permute``), an array a task (``PERMUTED``, and ``tlast`` if it
-    is per particle): with ``claim`` (one word, 0 at the
-    start) the next task is claimed with an atomic fetch-add, so a thread
-    slowed down takes fewer; with an empty ``claim``, tasks me, me + nthr,
-    ...  ``buf`` (N,) float64 is this thread's gather buffer, seen as each
-    array's type."""
+    is per particle; ``parallel.next_task``).  ``buf`` (N,) float64 is this
+    thread's gather buffer, seen as each array's type."""
     n = perm.shape[0]
     ntasks = 8 if tlast.shape[0] == n else 7
     r = 0
     while True:
-        if claim.shape[0] > 0:
-            q = fetch_add(claim, 0, 1)
-        else:
-            q = me + r * nthr
-            r += 1
+        q = next_task(claim, me, nthr, r)
+        r += 1
         if q >= ntasks:
             return 0
         # the largest first and the smallest (4 bytes) last, so that the
@@ -751,10 +731,8 @@ class Engine:
         # the nodes above the subtrees, then the subtrees, beside the kick, the
         # reaches and the clearing of the per-step arrays (``_first_phase``)
         ctl = cache_aligned((NFIRST,), np.int64)
-        tops = np.zeros((t, 4))
+        tops = np.zeros((t, 2))
         self.steal_ctl[:] = 0
-        if self.workers is not None:
-            self.workers.ctrl[ABORT] = 0
         ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         self._kick = 0.0  # applied now: every chunk is claimed by a call that ends
         res = self._pmap(_first_phase, [
@@ -768,7 +746,7 @@ class Engine:
             self.since_build = None
             raise SimulationError("kD-tree deeper than its work stack")
         if not touching_only:
-            self.top[:] = np.sort(tops[:, :2].ravel())[::-1][:2]
+            self.top[:] = np.sort(tops.ravel())[::-1][:2]
             if self.top[0] + self.top[1] >= self.par[K.P_HALFPER]:
                 # the re-sort is not applied yet: the storage order is still
                 # the particles', and the next step builds a fresh tree
@@ -792,10 +770,8 @@ class Engine:
             arrived = cache_aligned((8,), np.int64)[:1]
             claim = self._claim_word()
             tlast = self.tlast if self.guarded else NO_SLEEP
-            ctrl = self.workers.ctrl
-            ctrl[ABORT] = 0
             res = self._pmap(_permute_and_anchor, [
-                (k, t, claim, arrived, ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
+                (k, t, claim, arrived, self.workers.ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
                  self.ids, self.reach, tlast, self.perm, self.scratches[k], self.anc, self.ntop,
                  self.subroot_arr, self.nbox, self.nreach, self.order) for k in range(t)])
             assert min(res) == 0  # ABORT is set only by a raise, which map raises

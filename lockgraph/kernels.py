@@ -824,14 +824,14 @@ def compute_reach(pos, vel, rad, reach, par, extra, top):
     + g dt^2 / 2: a median, so a few fast particles do not widen everyone's
     search).  Correctness does not depend on the skin (a particle that outruns
     its reach widens it and searches again); it only trades candidate-list
-    length against such searches.  ``top`` (2,) receives the two largest reaches.
+    length against such searches.  ``top`` (2,), the two largest reaches
+    so far (zeros to begin with), takes in these particles' (so a thread can
+    pass it chunk after chunk).
     """
     n = pos.shape[0]
     dt = par[P_DT]
     s = par[P_SHEAR]
     fr = par[P_FR]
-    top[0] = 0.0
-    top[1] = 0.0
     for i in range(n):
         uy = vel[i, 1] + s * pos[i, 0]
         sp = math.sqrt(vel[i, 0] * vel[i, 0] + uy * uy + vel[i, 2] * vel[i, 2])

@@ -49,7 +49,8 @@ import time
 import numpy as np
 
 from ._jit import kernel
-from .atomics import bits_float, cpu_relax, cycles, float_bits, load, sched_yield, sleep_us
+from .atomics import (bits_float, cpu_relax, cycles, fetch_add, float_bits, load, sched_yield,
+                      sleep_us)
 from .atomics import spin_lock, spin_unlock, store, cas
 from .errors import InputError
 from .events import update_queue, update_queue_pair
@@ -608,6 +609,17 @@ def _await_done(sync, n, gen, wait_cycles, jump_cycles):
             sched_yield()
 
 
+@kernel(inline=True)
+def next_task(claim, me, nthr, r):
+    """Thread ``me`` of ``nthr``'s ``r``-th task (from 0) in a phase of
+    claimed tasks: the next one by an atomic fetch-add on ``claim[0]`` (0 at
+    the phase start), so a thread slowed down takes fewer; with ``claim``
+    empty (fixed shares), task me + r nthr."""
+    if claim.shape[0] > 0:
+        return fetch_add(claim, 0, 1)
+    return me + r * nthr
+
+
 _RUSAGE_THREAD = getattr(resource, "RUSAGE_THREAD", None)
 
 
@@ -758,6 +770,7 @@ class Workers:
         gen = self._gen
         self._results = [None] * len(arglist)
         self._sync[self._rest] = 0
+        self.ctrl[ABORT] = 0  # set by a failed task of an earlier call
         for k in range(n):
             self._tasks[k] = (fn, [(i, arglist[i]) for i in range(k, posted, n)])
             self._sync[k * NWSYNC + W_GEN] = gen

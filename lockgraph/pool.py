@@ -63,15 +63,15 @@ per thread (in flight).
 import numpy as np
 
 from ._jit import kernel
-from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_add, fetch_max, float_bits,
-                      load, sched_yield, spin_lock, spin_unlock, store)
+from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits, load,
+                      sched_yield, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
 from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_CONC,
                       S_REACHOUT, S_VIOL, STALL, VIOLATION, hop2, init_range, journal_room,
                       process_event)
 from .neighbors import LCOUNT
 from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
-                       wait_blocked)
+                       next_task, wait_blocked)
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
@@ -114,20 +114,15 @@ def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, to
 def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, dlo, dhi, dtour_t,
                  dtour_s):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
-    (``rows``, ``dtour_t``, ``dtour_s``: a row each): with ``claim`` (one
-    word, 0 at the start) it claims the next domain with an atomic fetch-add
-    until none is left, so a thread slowed down takes fewer; with an empty
-    ``claim``, domains me, me + nthr, ...  One call a thread, not one a
-    domain: each call from Python takes the GIL, and two threads taking it
-    in turn wait for each other's wake-up."""
+    (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
+    (``parallel.next_task``).  One call a thread, not one a domain: each
+    call from Python takes the GIL, and two threads taking it in turn wait
+    for each other's wake-up."""
     nd = dlo.shape[0]
     r = 0
     while True:
-        if claim.shape[0] > 0:
-            d = fetch_add(claim, 0, 1)
-        else:
-            d = me + r * nthr
-            r += 1
+        d = next_task(claim, me, nthr, r)
+        r += 1
         if d >= nd:
             return 0
         init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
