@@ -16,11 +16,23 @@ ran two threads at 0.7-2.7 times one thread's rate in the same minute
 in 83-92 % of the probes, the data-parallel search phase still fell to
 1.6x.  ``gather`` reads 64 MB per thread.
 
+A third probe, ``alu`` (eight independent multiply chains: throughput-bound,
+as a core shared with another guest's thread would show), was added on
+2026-12-04 evening, when runs of the ring showed steps whose 2-thread
+speedup fell to 1.55-1.65x while the sequential engine kept its pace.
+Over 1,200 steps of 20 benchmark runs (the ring, N = 200,000, pool engines)
+the median paired speedup was 1.64x in the steps whose memory probe read
+1.2-1.5 against 1.82-1.83x in those at 1.7 and above, and 1.62-1.68x in
+the steps whose ``alu`` probe read 1.5-1.85 against 1.83x at 1.85 and above:
+the host takes memory bandwidth or a share of a core, for seconds at a time.
+
 ``TwoCoreProbe().measure()``: one thread runs a probe, then two threads run
 it at once, for each of ``chain`` (a dependent multiply chain, about 4 ms, no
-memory traffic) and ``gather``; returns 2 x (one thread's time) / (two
-threads' time) of each, as (chain, gather): about 2 when the host gives two
-threads twice the work, about 1 when it gives them one thread's worth.
+memory traffic), ``gather`` and ``alu`` (about 4 ms); returns 2 x (one
+thread's time) / (two threads' time) of each, as (chain, gather, alu): about
+2 when the host gives two threads twice the work, about 1 when it gives them
+one thread's worth.  ``clear(probes)``: did the host leave two full cores at
+that probe (every value at least ``TWO_CORES``)?
 """
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -28,9 +40,14 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
+from lockgraph.atomics import load, store
+from lockgraph.parallel import cache_aligned
+
 CHAIN = 3_000_000  # multiply-xorshift steps: about 4 ms on this machine
 GATHER_MB = 64  # per thread: twice the 32 MB L3 of this machine's EPYC
 GATHER_READS = 300_000  # about 5 ms on one thread
+ALU = 1_000_000  # steps of the eight chains: about 4 ms
+VOLLEYS = 2000  # exchanges of a cache line between the two threads: about 1.5 ms
 # two cores, or not: the probe's values fall in two groups, 1.8-2.0 and
 # 0.95-1.3 (174 probes, 60 s, idle machine); 1.6 splits them
 TWO_CORES = 1.6
@@ -44,6 +61,51 @@ def chain(n, seed):
         x = x * 6364136223846793005 + 1442695040888963407
         x ^= x >> 13
     return x
+
+
+@njit(cache=True, nogil=True)
+def alu(n, seed):
+    """n steps of eight independent LCGs with an xorshift: no step waits on
+    another, so the core's multipliers, not latency, set the pace."""
+    a = seed
+    b = seed + 1
+    c = seed + 2
+    d = seed + 3
+    e = seed + 4
+    f = seed + 5
+    g = seed + 6
+    h = seed + 7
+    for _ in range(n):
+        a = a * 6364136223846793005 + 1442695040888963407
+        b = b * 6364136223846793005 + 1442695040888963407
+        c = c * 6364136223846793005 + 1442695040888963407
+        d = d * 6364136223846793005 + 1442695040888963407
+        e = e * 6364136223846793005 + 1442695040888963407
+        f = f * 6364136223846793005 + 1442695040888963407
+        g = g * 6364136223846793005 + 1442695040888963407
+        h = h * 6364136223846793005 + 1442695040888963407
+        a ^= a >> 13
+        b ^= b >> 13
+        c ^= c >> 13
+        d ^= d >> 13
+        e ^= e >> 13
+        f ^= f >> 13
+        g ^= g >> 13
+        h ^= h >> 13
+    return a ^ b ^ c ^ d ^ e ^ f ^ g ^ h
+
+
+@njit(cache=True, nogil=True)
+def volley(word, me, n):
+    """Player ``me`` (0 or 1) of n exchanges of one cache line: each waits for
+    its turn's value in ``word[0]`` and writes the next (atomic load and store:
+    a plain load would be hoisted out of the loop)."""
+    for k in range(n):
+        want = 2 * k + me
+        while load(word, 0) != want:
+            pass
+        store(word, 0, want + 1)
+    return 0
 
 
 @njit(cache=True, nogil=True)
@@ -68,6 +130,10 @@ class TwoCoreProbe:
         self._mem = [np.random.default_rng(s).random(m) for s in (1, 2)]
         chain(10, 1)  # compile (or load) before any timing
         gather(self._mem[0], 10, 1)
+        alu(10, 1)
+        self._word = cache_aligned((8,), np.int64)
+        volley(self._word, 0, 1)  # compile both players' calls: 0 -> 1
+        volley(self._word, 1, 1)  # 1 -> 2
         self.measure()  # start both threads
 
     def _scale(self, fn, args):
@@ -80,10 +146,28 @@ class TwoCoreProbe:
             j.result()
         return 2.0 * one / (time.perf_counter() - t0)
 
+    def handoff_ns(self, n=VOLLEYS):
+        """Nanoseconds for one cache line to go from one thread to the other and
+        back (the median exchange of n, from their total time)."""
+        self._word[0] = 0
+        t0 = time.perf_counter()
+        other = self._ex.submit(volley, self._word, 1, n)
+        volley(self._word, 0, n)
+        other.result()
+        return (time.perf_counter() - t0) / n * 1e9
+
     def measure(self):
-        """(chain, gather): 2 x (one thread's time) / (two threads' time) of each."""
+        """(chain, gather, alu, handoff): 2 x (one thread's time) / (two threads'
+        time) of each of the first three, and ``handoff_ns``."""
         return (self._scale(chain, [(self.n, 2), (self.n, 3)]),
-                self._scale(gather, [(a, GATHER_READS, s) for s, a in enumerate(self._mem)]))
+                self._scale(gather, [(a, GATHER_READS, s) for s, a in enumerate(self._mem)]),
+                self._scale(alu, [(ALU, 2), (ALU, 3)]), self.handoff_ns())
 
     def close(self):
         self._ex.shutdown()
+
+
+def clear(probes):
+    """Did the host leave this machine two full cores at a probe (``measure``'s
+    tuple): each of its three rates at least ``TWO_CORES``?"""
+    return min(probes[:3]) >= TWO_CORES

@@ -34,9 +34,16 @@ lost any; ``paired unstolen`` is the paired median over the steps in which
 neither this engine nor the sequential one lost a tick.  The host can also
 take a core, or memory bandwidth, without the guest seeing either: before
 every timed step ``host_probe`` runs a register-only loop and a memory-bound
-one on one thread and then on two, and each case ends with a line giving the
-two probes' median 2-thread scaling over the run (about 2: the host gave two
-threads twice the work; about 1: one thread's worth).
+one on one thread and then on two (and, since 2026-12-04 evening, a
+throughput-bound one), and each case ends with a line giving the probes'
+median 2-thread scaling over the run (about 2: the host gave two threads
+twice the work; about 1: one thread's worth).  ``paired clear`` is the
+paired median over the steps before which every probe found two full cores
+(``host_probe.clear``: all three at least 1.6), both before this engine's
+step and before the sequential engine's, with their count; ``paired
+contended`` is over the other steps.  Which steps count is decided before
+they run, from the probe alone.  The JSON (``--out``) holds every step's
+time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
@@ -97,7 +104,7 @@ from lockgraph import scenarios  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
-from host_probe import TWO_CORES, TwoCoreProbe  # noqa: E402
+from host_probe import TWO_CORES, TwoCoreProbe, clear  # noqa: E402
 
 CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish_marble": ("dish_marble", "late", 10001, 2001),
@@ -272,9 +279,10 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         cpu = {k: [] for k in engines}
         stolen = {k: [] for k in engines}
         # the host's two cores, probed before each step (host_probe): how much of
-        # the run the machine had two cores to give.  Per step it predicts
-        # little (the host switches within a second), so it is reported for
-        # the run, not used to pick steps
+        # the run the machine had two cores to give, and which steps ran with
+        # them (the paired median over those steps is reported beside the
+        # paired median over all; the probe runs before the step, so which
+        # steps count does not depend on the engine's own timing)
         probe = TwoCoreProbe()
         probes = []
         closing.append(probe)
@@ -299,6 +307,9 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
                 f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items()))
         ref = engines["sequential"].state().sha256()
+        # per engine, per timed step: did the probe just before it find two full cores?
+        clear_at = {k: [clear(p) for p in probes[i::len(engines)]]
+                    for i, k in enumerate(engines)}
         seq = walls["sequential"]
         out = {"scene": scene, "state": state, "n": int(sc.state.n), "dt": float(sc.dt),
                "steps": steps, "repeats": repeats, "runs": {},
@@ -308,6 +319,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
             ratios = [a / b for a, b in zip(seq, walls[label])]
             out["runs"][label] = {
                 "s_per_step": walls[label], "best_s_per_step": min(walls[label]),
+                "step_s": per_step[label], "step_phase_s": phases[label],
+                "step_cpu_s": cpu[label],
                 "speedup_best": min(seq) / min(walls[label]),
                 "speedup_median": statistics.median(ratios),
                 # the exact policy follows the sequential trajectory, so step i is the
@@ -333,6 +346,17 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 "speedup_paired_unstolen": _paired_where(
                     per_step["sequential"], per_step[label],
                     [x == 0 for x in stolen["sequential"]], [x == 0 for x in stolen[label]]),
+                # the paired median over the steps before which the host probe
+                # found two full cores (``host_probe.clear``), both before this
+                # engine's step and before the sequential one's, and over the others
+                "speedup_paired_clear": _paired_where(
+                    per_step["sequential"], per_step[label], clear_at["sequential"],
+                    clear_at[label]),
+                "speedup_paired_contended": _paired_where(
+                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
+                    [not (a and b) for a, b in zip(clear_at["sequential"], clear_at[label])]),
+                "clear_steps": sum(1 for a, b in zip(clear_at["sequential"], clear_at[label])
+                                   if a and b),
                 "events_per_step": float(d[K.S_POPS]) / (steps * repeats),
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
@@ -357,7 +381,8 @@ def print_case(name, res):
           f"{'events/step':>12s} {'concurrency':>12s} {'viol.':>6s} {'repairs':>8s} "
           f"{'identical':>10s} {'regions':>8s} {'interior':>9s} {'on 1 thread':>12s} "
           f"{'search ms (x)':>14s} {'events ms (x)':>14s} {'cores':>6s} {'steal %':>8s} "
-          f"{'(steps)':>8s} {'paired unstolen':>16s}")
+          f"{'(steps)':>8s} {'paired unstolen':>16s} {'paired clear (steps)':>21s} "
+          f"{'paired contended':>17s}")
     for label, r in res["runs"].items():
         lk = r.get("locks", {})
         print(f"  {label:29s} {r['best_s_per_step'] * 1e3:9.1f} {r['speedup_best']:8.2f} "
@@ -369,15 +394,22 @@ def print_case(name, res):
               + " ".join(f"{r['phase_ms'][k]:7.1f} ({r['phase_speedup_paired'][k]:4.2f})"
                          for k in ("search", "events"))
               + f" {r['cores_used']:6.2f} {100 * r['steal_share']:8.1f} "
-              f"{r['stolen_steps']:8d} {r['speedup_paired_unstolen']:16.2f}")
+              f"{r['stolen_steps']:8d} {r['speedup_paired_unstolen']:16.2f} "
+              f"{r['speedup_paired_clear']:13.2f} ({r['clear_steps']:4d}) "
+              f"{r['speedup_paired_contended']:17.2f}")
     pr = res["host_two_core_probes"]
     reg = [x[0] for x in pr]
     mem = [x[1] for x in pr]
+    alu = [x[2] for x in pr]
     two = sum(1 for x in reg if x >= TWO_CORES)
     print(f"  the host (host_probe, before each step): two threads' rate over one's, "
           f"registers median {statistics.median(reg):.2f} ({min(reg):.2f}-{max(reg):.2f}; "
           f"two cores in {two} of {len(pr)} probes), memory median "
-          f"{statistics.median(mem):.2f} ({min(mem):.2f}-{max(mem):.2f})")
+          f"{statistics.median(mem):.2f} ({min(mem):.2f}-{max(mem):.2f}), throughput median "
+          f"{statistics.median(alu):.2f} ({min(alu):.2f}-{max(alu):.2f}); all three at least "
+          f"{TWO_CORES} (two full cores) in {sum(1 for x in pr if clear(x))} of {len(pr)}; "
+          f"a cache line's round trip between the threads: median "
+          f"{statistics.median(x[3] for x in pr):.0f} ns")
 
 
 def main():
@@ -413,6 +445,13 @@ def main():
               f"cores used, the host's steal {100 * best[1]['steal_share']:.1f} % in "
               f"{best[1]['stolen_steps']} of its steps); all identical: "
               f"{all(r['identical'] for r in res['runs'].values())}")
+        clr = max((kv for kv in res["runs"].items() if kv[0] != "sequential"),
+                  key=lambda kv: kv[1]["speedup_paired_clear"] if kv[1]["clear_steps"] else -1.0)
+        print(f"    over the steps the host left two full cores (host_probe.clear before "
+              f"both engines' steps): {clr[0]} paired median "
+              f"{clr[1]['speedup_paired_clear']:.2f}x over {clr[1]['clear_steps']} of "
+              f"{res['steps'] * res['repeats']} steps ({clr[1]['speedup_paired_clear'] / TARGET:.2f} "
+              f"of the target); over the others {clr[1]['speedup_paired_contended']:.2f}x")
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
     if args.out:
         with open(args.out, "w") as fh:
