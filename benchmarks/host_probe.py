@@ -25,6 +25,10 @@ the median paired speedup was 1.64x in the steps whose memory probe read
 1.2-1.5 against 1.82-1.83x in those at 1.7 and above, and 1.62-1.68x in
 the steps whose ``alu`` probe read 1.5-1.85 against 1.83x at 1.85 and above:
 the host takes memory bandwidth or a share of a core, for seconds at a time.
+``volley`` times a cache line handed back and forth between the two
+threads: 675 ns a round trip through one minute that evening, 130-170 ns a
+few minutes later (the host had moved the virtual CPUs); the pool's events
+hand lines across at every boundary event.
 
 ``TwoCoreProbe().measure()``: one thread runs a probe, then two threads run
 it at once, for each of ``chain`` (a dependent multiply chain, about 4 ms, no
