@@ -35,8 +35,9 @@ it at once, for each of ``chain`` (a dependent multiply chain, about 4 ms, no
 memory traffic), ``gather`` and ``alu`` (about 4 ms); returns 2 x (one
 thread's time) / (two threads' time) of each, as (chain, gather, alu): about
 2 when the host gives two threads twice the work, about 1 when it gives them
-one thread's worth.  ``clear(probes)``: did the host leave two full cores at
-that probe (every value at least ``TWO_CORES``)?
+one thread's worth; and ``handoff_ns``, a cache line's round trip between
+the threads (ns).  ``clear(probes)``: did the host leave two full cores at
+that probe (each of the three rates at least ``TWO_CORES``)?
 """
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -152,7 +153,8 @@ class TwoCoreProbe:
 
     def handoff_ns(self, n=VOLLEYS):
         """Nanoseconds for one cache line to go from one thread to the other and
-        back (the median exchange of n, from their total time)."""
+        back: the mean of n exchanges (a pause of either thread by the host
+        shows as an outlier of microseconds)."""
         self._word[0] = 0
         t0 = time.perf_counter()
         other = self._ex.submit(volley, self._word, 1, n)

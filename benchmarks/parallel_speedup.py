@@ -42,8 +42,9 @@ paired median over the steps before which every probe found two full cores
 (``host_probe.clear``: all three at least 1.6), both before this engine's
 step and before the sequential engine's, with their count; ``paired
 contended`` is over the other steps.  Which steps count is decided before
-they run, from the probe alone.  The JSON (``--out``) holds every step's
-time, phases and CPU time besides.
+they run, from the probe alone.  The host line also gives the median time
+of a cache line's round trip between two threads (``handoff_ns``).  The
+JSON (``--out``) holds every step's time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
