@@ -27,10 +27,10 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .atomics import cpu_relax, fetch_add, load, sched_yield, store
+from .atomics import fetch_add, load, store
 from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
-                       classify_regions, cycles_per_second, next_task)
+                       classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import tournament_size
@@ -119,18 +119,6 @@ TOP_DONE, NEXT_CHUNK = 0, 8
 NFIRST = 16
 
 
-@kernel(inline=True)
-def _pause_spin(spins):
-    """One look of a wait for another thread: a pause, and after 256 looks a
-    yield (with more threads than cores the one waited for may need this
-    core).  Returns the looks so far."""
-    if spins < 256:
-        cpu_relax()
-    else:
-        sched_yield()
-    return spins + 1
-
-
 @kernel
 def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h, reaches, tops,
                  tl, cis, xhead, ctr, hidden, perm, ntop, depth_split, fresh, vslots, vids,
@@ -175,7 +163,7 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     while load(ctl, TOP_DONE) == 0:
         if load(ctrl, ABORT) != 0:
             return -1
-        spins = _pause_spin(spins)
+        spins = pause_spin(spins)
     if load(ctl, TOP_DONE) < 0:
         return -1
     for k in range(me, subroots.shape[0], nthr):
@@ -236,7 +224,7 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
     while load(arrived, 0) < nthr:
         if load(ctrl, ABORT) != 0:
             return -1
-        spins = _pause_spin(spins)
+        spins = pause_spin(spins)
     for k in range(me, subroots.shape[0], nthr):
         nd = subroots[k]
         lo = ntop[nd, START]

@@ -542,6 +542,18 @@ JUMP_TRIES = 8
 WAIT_SECONDS = 0.05
 
 
+@kernel(inline=True)
+def pause_spin(spins):
+    """One look of a wait for another thread: a pause, and after 256 looks a
+    yield (with more threads than cores the one waited for may need this
+    core).  Returns the looks so far."""
+    if spins < 256:
+        cpu_relax()
+    else:
+        sched_yield()
+    return spins + 1
+
+
 @kernel
 def _await_task(sync, at, old, rest, spin_cycles, jump_cycles):
     """A pool thread's wait for its next task: spin on ``sync[at]`` until it
@@ -567,11 +579,7 @@ def _await_task(sync, at, old, rest, spin_cycles, jump_cycles):
         if now - prev > jump_cycles:
             return -2
         prev = now
-        spins += 1
-        if spins < 256:
-            cpu_relax()
-        else:
-            sched_yield()
+        spins = pause_spin(spins)
 
 
 @kernel
