@@ -28,7 +28,16 @@ the host takes memory bandwidth or a share of a core, for seconds at a time.
 ``volley`` times a cache line handed back and forth between the two
 threads: 675 ns a round trip through one minute that evening, 130-170 ns a
 few minutes later (the host had moved the virtual CPUs); the pool's events
-hand lines across at every boundary event.
+hand lines across at every boundary event.  Later that night the round trip
+switched between two levels, 130-200 ns and 340-480 ns, every few minutes.
+Over 270 steps of the 50,000-grain bed (pool engines, nine benchmark runs),
+31 of the 34 steps slower than 1.3x came after a round trip of 300 ns or
+more; in an instrumented run (50 steps, 33 of them after a round trip of 250
+ns or more) the sequential engine's events cost the same in both levels
+(2,404 and 2,415 cycles each) while the 2-thread pool's rose from 3,127 to
+5,074 cycles in every part, its own domain's queue updates included (472 to
+754): data the other thread touched last comes from far away.  The register,
+throughput and memory probes do not see this; ``near(probes)`` does.
 
 ``TwoCoreProbe().measure()``: one thread runs a probe, then two threads run
 it at once, for each of ``chain`` (a dependent multiply chain, about 4 ms, no
@@ -37,7 +46,8 @@ thread's time) / (two threads' time) of each, as (chain, gather, alu): about
 2 when the host gives two threads twice the work, about 1 when it gives them
 one thread's worth; and ``handoff_ns``, a cache line's round trip between
 the threads (ns).  ``clear(probes)``: did the host leave two full cores at
-that probe (each of the three rates at least ``TWO_CORES``)?
+that probe (each of the three rates at least ``TWO_CORES``)?  ``near(probes)``:
+was the round trip below ``FAR_NS``?
 """
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -56,6 +66,9 @@ VOLLEYS = 2000  # exchanges of a cache line between the two threads: about 1.5 m
 # two cores, or not: the probe's values fall in two groups, 1.8-2.0 and
 # 0.95-1.3 (174 probes, 60 s, idle machine); 1.6 splits them
 TWO_CORES = 1.6
+# between the two levels the round trip took on 2026-12-04 (130-200 ns and
+# 340-480 ns; a partner thread the host did not run at all took 4-8 us)
+FAR_NS = 250.0
 
 
 @njit(cache=True, nogil=True)
@@ -177,3 +190,9 @@ def clear(probes):
     """Did the host leave this machine two full cores at a probe (``measure``'s
     tuple): each of its three rates at least ``TWO_CORES``?"""
     return min(probes[:3]) >= TWO_CORES
+
+
+def near(probes):
+    """Were the two threads near each other at a probe (``measure``'s tuple): a
+    cache line's round trip between them below ``FAR_NS``?"""
+    return probes[3] < FAR_NS

@@ -105,7 +105,7 @@ from lockgraph import scenarios  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
-from host_probe import TWO_CORES, TwoCoreProbe, clear  # noqa: E402
+from host_probe import FAR_NS, TWO_CORES, TwoCoreProbe, clear, near  # noqa: E402
 
 CASES = {"ring": ("ring", "early", 200000, 50000),
          "dish_marble": ("dish_marble", "late", 10001, 2001),
@@ -311,6 +311,9 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         # per engine, per timed step: did the probe just before it find two full cores?
         clear_at = {k: [clear(p) for p in probes[i::len(engines)]]
                     for i, k in enumerate(engines)}
+        # and were its two threads near each other (``host_probe.near``)?
+        near_at = {k: [near(p) for p in probes[i::len(engines)]]
+                   for i, k in enumerate(engines)}
         seq = walls["sequential"]
         out = {"scene": scene, "state": state, "n": int(sc.state.n), "dt": float(sc.dt),
                "steps": steps, "repeats": repeats, "runs": {},
@@ -358,6 +361,16 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                     [not (a and b) for a, b in zip(clear_at["sequential"], clear_at[label])]),
                 "clear_steps": sum(1 for a, b in zip(clear_at["sequential"], clear_at[label])
                                    if a and b),
+                # split by the round trip just before this engine's step (the
+                # sequential engine's one thread hands nothing across: its events
+                # cost the same at either level, host_probe), near and far
+                "speedup_paired_near": _paired_where(
+                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
+                    near_at[label]),
+                "speedup_paired_far": _paired_where(
+                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
+                    [not x for x in near_at[label]]),
+                "near_steps": sum(near_at[label]),
                 "events_per_step": float(d[K.S_POPS]) / (steps * repeats),
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
@@ -453,6 +466,14 @@ def main():
               f"{clr[1]['speedup_paired_clear']:.2f}x over {clr[1]['clear_steps']} of "
               f"{res['steps'] * res['repeats']} steps ({clr[1]['speedup_paired_clear'] / TARGET:.2f} "
               f"of the target); over the others {clr[1]['speedup_paired_contended']:.2f}x")
+        nr = max((kv for kv in res["runs"].items() if kv[0] != "sequential"),
+                 key=lambda kv: kv[1]["speedup_paired_near"] if kv[1]["near_steps"] else -1.0)
+        n_all = res["steps"] * res["repeats"]
+        print(f"    by the round trip between the threads just before the step "
+              f"(host_probe.near, below {FAR_NS:.0f} ns): {nr[0]} paired median "
+              f"{nr[1]['speedup_paired_near']:.2f}x over {nr[1]['near_steps']} of {n_all} "
+              f"steps; {nr[1]['speedup_paired_far']:.2f}x over the "
+              f"{n_all - nr[1]['near_steps']} after a longer one")
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
     if args.out:
         with open(args.out, "w") as fh:
