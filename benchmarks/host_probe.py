@@ -29,7 +29,7 @@ the host takes memory bandwidth or a share of a core, for seconds at a time.
 threads: 675 ns a round trip through one minute that evening, 130-170 ns a
 few minutes later (the host had moved the virtual CPUs); the pool's events
 hand lines across at every boundary event.  Later that night the round trip
-switched between two levels, 130-200 ns and 340-480 ns, every few minutes.
+switched between two levels, 130-200 ns and 340-550 ns, every few minutes.
 Over 270 steps of the 50,000-grain bed (pool engines, nine benchmark runs),
 31 of the 34 steps slower than 1.3x came after a round trip of 300 ns or
 more; in an instrumented run (50 steps, 33 of them after a round trip of 250
@@ -67,7 +67,7 @@ VOLLEYS = 2000  # exchanges of a cache line between the two threads: about 1.5 m
 # 0.95-1.3 (174 probes, 60 s, idle machine); 1.6 splits them
 TWO_CORES = 1.6
 # between the two levels the round trip took on 2026-12-04 (130-200 ns and
-# 340-480 ns; a partner thread the host did not run at all took 4-8 us)
+# 340-550 ns; a partner thread the host did not run at all took 4-8 us)
 FAR_NS = 250.0
 
 

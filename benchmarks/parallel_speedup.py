@@ -43,8 +43,12 @@ paired median over the steps before which every probe found two full cores
 step and before the sequential engine's, with their count; ``paired
 contended`` is over the other steps.  Which steps count is decided before
 they run, from the probe alone.  The host line also gives the median time
-of a cache line's round trip between two threads (``handoff_ns``).  The
-JSON (``--out``) holds every step's time, phases and CPU time besides.
+of a cache line's round trip between two threads (``handoff_ns``), and
+each case's last line splits the paired median by the round trip measured
+just before the 2-thread engine's step (``host_probe.near``: below
+``FAR_NS``, 250 ns; the host switches between about 150 and about 450 ns
+every few minutes, and the pool's events cost far more at the long one).
+The JSON (``--out``) holds every step's time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
 ``schedule="auto"``: each step's events on the threads or on one thread,
