@@ -239,6 +239,13 @@ def _on_one(eng):
     return eng.scheduler.count[1] if eng.scheduler is not None else 0
 
 
+def _best_over(res, key, count):
+    """The threaded engine (label, result) with the highest paired median
+    ``key`` over a subset of steps, among those with any (``count``)."""
+    return max((kv for kv in res["runs"].items() if kv[0] != "sequential"),
+               key=lambda kv: kv[1][key] if kv[1][count] else -1.0)
+
+
 def _paired_where(seq, mine, seq_ok, my_ok):
     """The median of seq[i] / mine[i] over the steps i where both are ok (nan if none)."""
     r = [a / b for a, b, x, y in zip(seq, mine, seq_ok, my_ok) if x and y]
@@ -325,6 +332,12 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         for label, eng in engines.items():
             d = eng.totals - base[label]
             ratios = [a / b for a, b in zip(seq, walls[label])]
+
+            def over(ok, label=label):
+                """The paired median over the steps where ok (this engine's own)."""
+                return _paired_where(per_step["sequential"], per_step[label],
+                                     [True] * len(ok), ok)
+
             out["runs"][label] = {
                 "s_per_step": walls[label], "best_s_per_step": min(walls[label]),
                 "step_s": per_step[label], "step_phase_s": phases[label],
@@ -360,20 +373,15 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 "speedup_paired_clear": _paired_where(
                     per_step["sequential"], per_step[label], clear_at["sequential"],
                     clear_at[label]),
-                "speedup_paired_contended": _paired_where(
-                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
+                "speedup_paired_contended": over(
                     [not (a and b) for a, b in zip(clear_at["sequential"], clear_at[label])]),
                 "clear_steps": sum(1 for a, b in zip(clear_at["sequential"], clear_at[label])
                                    if a and b),
                 # split by the round trip just before this engine's step (the
                 # sequential engine's one thread hands nothing across: its events
                 # cost the same at either level, host_probe), near and far
-                "speedup_paired_near": _paired_where(
-                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
-                    near_at[label]),
-                "speedup_paired_far": _paired_where(
-                    per_step["sequential"], per_step[label], [True] * len(per_step[label]),
-                    [not x for x in near_at[label]]),
+                "speedup_paired_near": over(near_at[label]),
+                "speedup_paired_far": over([not x for x in near_at[label]]),
                 "near_steps": sum(near_at[label]),
                 "events_per_step": float(d[K.S_POPS]) / (steps * repeats),
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
@@ -463,15 +471,13 @@ def main():
               f"cores used, the host's steal {100 * best[1]['steal_share']:.1f} % in "
               f"{best[1]['stolen_steps']} of its steps); all identical: "
               f"{all(r['identical'] for r in res['runs'].values())}")
-        clr = max((kv for kv in res["runs"].items() if kv[0] != "sequential"),
-                  key=lambda kv: kv[1]["speedup_paired_clear"] if kv[1]["clear_steps"] else -1.0)
+        clr = _best_over(res, "speedup_paired_clear", "clear_steps")
         print(f"    over the steps the host left two full cores (host_probe.clear before "
               f"both engines' steps): {clr[0]} paired median "
               f"{clr[1]['speedup_paired_clear']:.2f}x over {clr[1]['clear_steps']} of "
               f"{res['steps'] * res['repeats']} steps ({clr[1]['speedup_paired_clear'] / TARGET:.2f} "
               f"of the target); over the others {clr[1]['speedup_paired_contended']:.2f}x")
-        nr = max((kv for kv in res["runs"].items() if kv[0] != "sequential"),
-                 key=lambda kv: kv[1]["speedup_paired_near"] if kv[1]["near_steps"] else -1.0)
+        nr = _best_over(res, "speedup_paired_near", "near_steps")
         n_all = res["steps"] * res["repeats"]
         print(f"    by the round trip between the threads just before the step "
               f"(host_probe.near, below {FAR_NS:.0f} ns): {nr[0]} paired median "
