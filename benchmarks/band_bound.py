@@ -67,11 +67,11 @@ POOL_LEVELS = 2
 REGION_SCALE = 4.0
 
 
-def record(name, n, steps, bed_code, bed_steps):
+def record(name, n, steps, bed_code, bed_steps, bed_ranks=2):
     """Per step: (events structured array, slot of each id, noff, candidate slots,
     (lock region of each slot, loff, ladj) of the lock graph at SCALE
     REGION_SCALE), and the cycle counter's frequency."""
-    sc = load_case(name, n, bed_code, bed_steps)
+    sc = load_case(name, n, bed_code, bed_steps, bed_ranks)
     eng = Engine(sc.state, sc.physics, sc.dt, trace_locks=[("graph", REGION_SCALE)])
     lists = []
     inner = eng._events_sequential
@@ -159,8 +159,9 @@ def pool(trace, cps, cut, syncs, domains, threads):
     return rows
 
 
-def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domains, threads):
-    trace, cps = record(name, n, steps, bed_code, bed_steps)
+def bound(name, n, steps, levels, depths, cut, syncs, bed_code, bed_steps, domains, threads,
+          bed_ranks=2):
+    trace, cps = record(name, n, steps, bed_code, bed_steps, bed_ranks)
     rows = {}
     for ev, slot, noff, nent, _ in trace:
         si, sj, cost = in_slots(ev, slot, cps)
@@ -239,7 +240,7 @@ def main():
     compile_kernels()
     for name in names:
         bound(name, sizes[name], args.steps, levels, depths, args.cut, syncs, args.bed_code,
-              args.bed_steps, domains, args.threads)
+              args.bed_steps, domains, args.threads, args.bed_ranks)
 
 
 if __name__ == "__main__":

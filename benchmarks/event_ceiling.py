@@ -90,8 +90,8 @@ def run(engs, steps):
     return out
 
 
-def ceiling(name, n, steps, repeats, axis, bed_code, bed_steps):
-    sc = load_case(name, n, bed_code, bed_steps)
+def ceiling(name, n, steps, repeats, axis, bed_code, bed_steps, bed_ranks=2):
+    sc = load_case(name, n, bed_code, bed_steps, bed_ranks)
     st = sc.state
     ax = "xyz".index(axis)
     cut = float(np.median(st.pos[:, ax]))
@@ -149,7 +149,7 @@ def main():
     compile_kernels()
     for name in names:
         ceiling(name, sizes[name], args.steps, args.repeats, args.axis, args.bed_code,
-                args.bed_steps)
+                args.bed_steps, args.bed_ranks)
 
 
 if __name__ == "__main__":

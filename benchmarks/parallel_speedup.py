@@ -73,8 +73,10 @@ N = 50,000, target >= 1.7x):
 * ``dish_marble_dem``: dish_marble late at the issue's N = 50,000
   (``--quick``: 10,001) with its bed settled by a DEM code (``--bed-code``)
   instead of by the engine: the dish scene's falling block settled by
-  LAMMPS at E = 1e7 Pa (70 min on one core at N = 50,000 the first time,
-  then cached), radii shrunk by the largest soft overlap, at rest; the marble
+  LAMMPS at E = 1e7 Pa on ``--bed-ranks`` MPI ranks (2: at N = 50,000, 28 min
+  on this 2-core machine the first time, then cached; 1 rank settles another
+  bed, with about a tenth of the events, in about 70 min), radii shrunk by the
+  largest soft overlap, at rest; the marble
   then placed as the scene places it (``marble_gap`` above the highest
   grain, moving down at ``marble_speed``), and run ``--bed-steps``
   sequential steps before the timing (the grains close their gaps; at
@@ -155,6 +157,9 @@ def add_case_options(ap, cases):
     ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
     ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
                     help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
+    ap.add_argument("--bed-ranks", type=int, default=2,
+                    help="dish_marble_dem: the MPI ranks that settle its bed (2: the bed every "
+                         "measurement since 2026-12-03 used; 1: the one before; each cached)")
     ap.add_argument("--bed-steps", type=int, default=100,
                     help="deep_bed, dish_marble_dem: sequential steps of the falling "
                          "marble before timing (100)")
@@ -204,22 +209,25 @@ def after_steps(state, physics, dt, steps):
         eng.close()
 
 
-def dem_late(scene, n, code, presteps):
+def dem_late(scene, n, code, presteps, ranks=2):
     """A scene-like namespace (state, physics, dt): ``scene``'s late state with
-    its bed of n - 1 grains settled by the DEM ``code`` (cached) and the marble
-    placed above it as the scene places it, then run ``presteps`` sequential
-    steps.  The shrunk grains close their gaps from the bottom up (N = 50,000:
-    99 events at step 10, 33,000 at step 100, nearly all in the bottom 20 mm)
-    and the marble reaches the bed's top at about step 100."""
+    its bed of n - 1 grains settled by the DEM ``code`` on ``ranks`` MPI ranks
+    (cached; ``marble_drop.settled_bed``) and the marble placed above it as the
+    scene places it, then run ``presteps`` sequential steps.  The shrunk grains
+    close their gaps from the bottom up and the marble reaches the bed's top at
+    about step 100 (N = 50,000; events a step: one rank's bed 99 at step 10 and
+    33,000 at step 100, nearly all in the bottom 20 mm, on 2026-11-30; two
+    ranks' bed 90 at step 10, 96,000 at step 90, 301,000 at step 100, on
+    2026-12-05)."""
     from lockgraph import marble_drop as M
     from lockgraph.generators import add_marble
 
     sf = scenarios.read(scene)
     p = scenarios.resolve_params(sf, n, None, None, None)
     bed_params = {k: v for k, v in p.items() if k not in M.MARBLE_KEYS + ("n", "seed")}
-    bed, sc, info = M.settled_bed(n - 1, p["seed"], bed_params, code, progress=say)
-    say(f"{scene} late N={n}: {code}-settled bed ({info['cache']}); {presteps} sequential "
-        f"steps")
+    bed, sc, info = M.settled_bed(n - 1, p["seed"], bed_params, code, progress=say, ranks=ranks)
+    say(f"{scene} late N={n}: bed settled by {code} on {ranks} rank(s) ({info['cache']}); "
+        f"{presteps} sequential steps")
     return after_steps(add_marble(bed, p), sc.physics, p["dt"], presteps)
 
 
@@ -252,19 +260,20 @@ def _paired_where(seq, mine, seq_ok, my_ok):
     return statistics.median(r) if r else float("nan")
 
 
-def load_case(name, n, bed_code="lammps", bed_steps=100):
+def load_case(name, n, bed_code="lammps", bed_steps=100, bed_ranks=2):
     """A case's starting point: a scene-like namespace (state, physics, dt)."""
     scene, state = CASES[name][:2]
     say(f"{name}: loading {scene} {state} N={n}")
     if name == "deep_bed":
         return deep_bed(bed_code, bed_steps)
     if name == "dish_marble_dem":
-        return dem_late(scene, n, bed_code, bed_steps)
+        return dem_late(scene, n, bed_code, bed_steps, bed_ranks)
     return scenarios.load(scene, state, n=n, progress=say)
 
 
-def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100):
-    sc = load_case(name, n, bed_code, bed_steps)
+def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100,
+             bed_ranks=2):
+    sc = load_case(name, n, bed_code, bed_steps, bed_ranks)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
         if schedule == "pool":  # K domains shared by the two threads
@@ -457,7 +466,7 @@ def main():
     for c in names:
         scene, state, _, _ = CASES[c]
         results[c] = run_case(c, scene, state, sizes[c], args.steps, args.repeats, locks,
-                              args.bed_code, args.bed_steps)
+                              args.bed_code, args.bed_steps, args.bed_ranks)
         print_case(c, results[c])
     print(f"\nTarget: 2-thread speedup >= {TARGET} (exact policy).")
     for c, res in results.items():

@@ -41,12 +41,19 @@ def _key(**kw):
 
 
 def settled_bed(n, seed=1, params=None, code="lammps", stiffness=1e7, time=None,
-                progress=None, use_cache=True):
-    """A settled dish bed of ``n`` grains made by ``code`` from the dish scene's
-    falling block, as a hard-sphere state.  Returns (State, Scenario of the
-    block, info dict with the shrink factor and the DEM wall time).  Cached on
-    disk (``LOCKGRAPH_CACHE``) by its parameters; raises ScenarioError if the
-    bed has not settled (rms speed under 3 mm/s) by the end of the run."""
+                progress=None, use_cache=True, ranks=1):
+    """A settled dish bed of ``n`` grains made by ``code`` on ``ranks`` MPI
+    ranks from the dish scene's falling block, as a hard-sphere state.
+    Returns (State, Scenario of the block, info dict with the shrink factor and
+    the DEM wall time).  Cached on disk (``LOCKGRAPH_CACHE``) by its
+    parameters, the ranks included: another domain decomposition sums the
+    contact forces in another order and settles another bed (N = 50,000, 100
+    steps after the marble was added: one rank's bed, settled within the
+    first run, 33,000-44,000 events a step on 2026-11-30; two ranks', which
+    needed 0.2 s more, 339,000 on 2026-12-05).  Raises ScenarioError if the bed
+    has not settled (rms speed under 3 mm/s) by the end of the run."""
+    if isinstance(ranks, bool) or not isinstance(ranks, (int, np.integer)) or ranks < 1:
+        raise InputError("ranks", f"must be an integer >= 1 (got {ranks!r})")
     sc = scenarios.load("dish", "early", n=n, seed=seed, params=params)
     if time is None:  # the fall of the block's top plus the settling seen at N = 1000
         top = float(np.max(sc.state.pos[:, 2]))
@@ -54,8 +61,9 @@ def settled_bed(n, seed=1, params=None, code="lammps", stiffness=1e7, time=None,
     # the key holds what the DEM run depends on (not lockgraph's tc, dt, ...)
     dem_params = {k: v for k, v in sc.params.items()
                   if k not in ("tc", "dt", "settle_speed", "settle_time_max")}
+    extra = {"ranks": int(ranks)} if ranks != 1 else {}  # one rank: the keys made before ranks
     key = _key(n=n, seed=seed, params=dem_params, code=code, stiffness=stiffness, time=time,
-               version=dem.code_version(code))
+               version=dem.code_version(code), **extra)
     path = scenarios.cache_dir() / f"dem-bed-{key}.npz"
     if use_cache and path.is_file():
         try:
@@ -69,7 +77,7 @@ def settled_bed(n, seed=1, params=None, code="lammps", stiffness=1e7, time=None,
     chunk = time
     while True:  # run on in chunks of 0.2 s until the bed has settled
         res = dem.run(state, sc.physics, code, chunk, contact,
-                      samples=max(2, int(round(chunk / 0.01))), progress=progress)
+                      samples=max(2, int(round(chunk / 0.01))), ranks=ranks, progress=progress)
         wall += res.wall_s
         total += chunk
         if res.failures:

@@ -156,3 +156,31 @@ def test_bad_input_names_the_field():
         dem.run(st, DISH, "lammps", -1.0)
     with pytest.raises(InputError, match="samples"):
         dem.run(st, DISH, "lammps", 0.1, samples=0)
+
+
+def test_settled_bed_is_cached_by_its_ranks(tmp_path, monkeypatch):
+    """Another MPI decomposition settles another bed (README, Benchmarks), so a
+    bed settled on one rank is never served for two: each is made and cached
+    under its own key.  The DEM run is stood in for by the block itself, at
+    rest (the harness, not the physics, is under test)."""
+    from lockgraph import marble_drop as M
+    monkeypatch.setenv("LOCKGRAPH_CACHE", str(tmp_path))
+    runs = []
+
+    def at_rest(state, physics, code, duration, contact, samples=1, ranks=1, progress=None):
+        runs.append(ranks)
+        pos = np.stack([state.pos, state.pos])
+        return dem.DemResult(code, "test", np.array([0.0, duration]), pos, np.zeros_like(pos),
+                             1e-6, 2e-5, 1, 0.0, 0.0)
+
+    monkeypatch.setattr(M.dem, "run", at_rest)
+    params = {"cylinder_radius": 0.005}
+    one, _, _ = M.settled_bed(60, params=params)
+    two, _, _ = M.settled_bed(60, params=params, ranks=2)
+    again, _, info = M.settled_bed(60, params=params, ranks=2)
+    assert runs == [1, 2]  # the third call is served from the cache
+    assert len(list(tmp_path.glob("dem-bed-*.npz"))) == 2
+    assert info["dem_wall_s"] == 0.0 and again.sha256() == two.sha256()
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(InputError, match="ranks"):
+            M.settled_bed(60, params=params, ranks=bad)
