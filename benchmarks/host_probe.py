@@ -47,7 +47,10 @@ thread's time) / (two threads' time) of each, as (chain, gather, alu): about
 one thread's worth; and ``handoff_ns``, a cache line's round trip between
 the threads (ns).  ``clear(probes)``: did the host leave two full cores at
 that probe (each of the three rates at least ``TWO_CORES``)?  ``near(probes)``:
-was the round trip below ``FAR_NS``?
+was the round trip below ``FAR_NS``?  ``far(probes)``: was it at least
+``FAR_NS`` and below ``LATE_NS`` (the threads' cores far apart), not a partner
+thread woken late (at least ``LATE_NS``: its wake-up, at the start of the
+exchanges, spread over them)?
 """
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -69,6 +72,12 @@ TWO_CORES = 1.6
 # between the two levels the round trip took on 2026-12-04 (130-200 ns and
 # 340-550 ns; a partner thread the host did not run at all took 4-8 us)
 FAR_NS = 250.0
+# a round trip this long is not the distance between the cores: the partner
+# thread (woken by the pool for the exchanges) started milliseconds late.  On
+# 2026-12-05 (EPYC, 570 bed steps): 340 steps after a round trip below 200 ns
+# ran at a paired median of 1.79x, 145 after 250-2,000 ns at 1.10x, and 84
+# after 2 us or more at 1.68x, like the near ones
+LATE_NS = 2000.0
 
 
 @njit(cache=True, nogil=True)
@@ -196,3 +205,10 @@ def near(probes):
     """Were the two threads near each other at a probe (``measure``'s tuple): a
     cache line's round trip between them below ``FAR_NS``?"""
     return probes[3] < FAR_NS
+
+
+def far(probes):
+    """Were the two threads far apart at a probe: a round trip of at least
+    ``FAR_NS`` but below ``LATE_NS`` (longer: a partner woken late, which says
+    nothing of the distance)?"""
+    return FAR_NS <= probes[3] < LATE_NS
