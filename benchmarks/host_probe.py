@@ -73,11 +73,12 @@ TWO_CORES = 1.6
 # 340-550 ns; a partner thread the host did not run at all took 4-8 us)
 FAR_NS = 250.0
 # a round trip this long is not the distance between the cores: the partner
-# thread (woken by the pool for the exchanges) started milliseconds late.  On
-# 2026-12-05 (EPYC, 570 bed steps): 340 steps after a round trip below 200 ns
-# ran at a paired median of 1.79x, 145 after 250-2,000 ns at 1.10x, and 84
-# after 2 us or more at 1.68x, like the near ones
-LATE_NS = 2000.0
+# thread (woken by the pool for the exchanges) started late.  On 2026-12-05
+# (EPYC; 3,030 bed steps of 101 benchmark runs, pool 8 and 16), the paired
+# median was 1.76x after a round trip below 250 ns (2,046 steps), 1.34x at
+# 250-400 ns (56), 1.09x at 400-700 ns (440), 1.69x at 700-2,000 ns (64) and
+# 1.72x at 2 us or more (424): above 700 ns the steps ran like the near ones
+LATE_NS = 700.0
 
 
 @njit(cache=True, nogil=True)

@@ -49,7 +49,7 @@ just before the 2-thread engine's step (``host_probe.near``: below
 ``FAR_NS``, 250 ns; the host switches between about 150 and about 450 ns
 every few minutes, and the pool's events cost far more at the long one),
 apart from the steps whose probe's partner thread started late (a round trip
-of ``LATE_NS``, 2 us, or more: ``host_probe.far``).
+of ``LATE_NS``, 700 ns, or more: ``host_probe.far``).
 The JSON (``--out``) holds every step's time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
