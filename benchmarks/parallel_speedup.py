@@ -151,6 +151,13 @@ def parse_locks(text):
     return out
 
 
+def _at_least_one(text):
+    """argparse type: an integer >= 1."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return int(text)
+
+
 def add_case_options(ap, cases):
     """The options that choose cases and their beds (``--cases`` defaulting to
     ``cases``, ``--n CASE=N``, ``--bed-code``, ``--bed-steps``); read them
@@ -159,7 +166,7 @@ def add_case_options(ap, cases):
     ap.add_argument("--n", action="append", default=[], metavar="CASE=N")
     ap.add_argument("--bed-code", default="lammps", choices=("lammps", "liggghts"),
                     help="the DEM code that settles the deep_bed and dish_marble_dem beds (lammps)")
-    ap.add_argument("--bed-ranks", type=int, default=2,
+    ap.add_argument("--bed-ranks", type=_at_least_one, default=2,
                     help="dish_marble_dem: the MPI ranks that settle its bed (2: the bed every "
                          "measurement since 2026-12-03 used; 1: the one before; each cached)")
     ap.add_argument("--bed-steps", type=int, default=100,
