@@ -66,18 +66,24 @@ GATHER_MB = 64  # per thread: twice the 32 MB L3 of this machine's EPYC
 GATHER_READS = 300_000  # about 5 ms on one thread
 ALU = 1_000_000  # steps of the eight chains: about 4 ms
 VOLLEYS = 2000  # exchanges of a cache line between the two threads: about 1.5 ms
+WARM = 50  # exchanges before the timing: the partner thread is running by then
 # two cores, or not: the probe's values fall in two groups, 1.8-2.0 and
 # 0.95-1.3 (174 probes, 60 s, idle machine); 1.6 splits them
 TWO_CORES = 1.6
 # between the two levels the round trip took on 2026-12-04 (130-200 ns and
-# 340-550 ns; a partner thread the host did not run at all took 4-8 us)
+# 340-550 ns; a partner thread the host did not run at all took 4-8 us), and
+# on 2026-12-05 with the partner's wake-up left out (62-126 and 325-395 ns)
 FAR_NS = 250.0
 # a round trip this long is not the distance between the cores: the partner
 # thread (woken by the pool for the exchanges) started late.  On 2026-12-05
 # (EPYC; 3,030 bed steps of 101 benchmark runs, pool 8 and 16), the paired
 # median was 1.76x after a round trip below 250 ns (2,046 steps), 1.34x at
 # 250-400 ns (56), 1.09x at 400-700 ns (440), 1.69x at 700-2,000 ns (64) and
-# 1.72x at 2 us or more (424): above 700 ns the steps ran like the near ones
+# 1.72x at 2 us or more (424): above 700 ns the steps ran like the near ones.
+# Since then the exchanges are timed from the end of ``WARM`` first ones: over
+# 360 probes of eight bed runs none was late, the round trip took 62-126 ns
+# or 325-395 ns, and the paired median was 1.75x after the short one (199
+# steps) and 1.09x after the long one (41)
 LATE_NS = 700.0
 
 
@@ -124,11 +130,12 @@ def alu(n, seed):
 
 
 @njit(cache=True, nogil=True)
-def volley(word, me, n):
-    """Player ``me`` (0 or 1) of n exchanges of one cache line: each waits for
-    its turn's value in ``word[0]`` and writes the next (atomic load and store:
-    a plain load would be hoisted out of the loop)."""
-    for k in range(n):
+def volley(word, me, n, start):
+    """Player ``me`` (0 or 1) of exchanges ``start`` .. ``start + n - 1`` of
+    one cache line: each waits for its turn's value in ``word[0]`` and writes
+    the next (atomic load and store: a plain load would be hoisted out of the
+    loop)."""
+    for k in range(start, start + n):
         want = 2 * k + me
         while load(word, 0) != want:
             pass
@@ -160,8 +167,8 @@ class TwoCoreProbe:
         gather(self._mem[0], 10, 1)
         alu(10, 1)
         self._word = cache_aligned((8,), np.int64)
-        volley(self._word, 0, 1)  # compile both players' calls: 0 -> 1
-        volley(self._word, 1, 1)  # 1 -> 2
+        volley(self._word, 0, 1, 0)  # compile both players' calls: 0 -> 1
+        volley(self._word, 1, 1, 0)  # 1 -> 2
         self.measure()  # start both threads
 
     def _scale(self, fn, args):
@@ -176,14 +183,19 @@ class TwoCoreProbe:
 
     def handoff_ns(self, n=VOLLEYS):
         """Nanoseconds for one cache line to go from one thread to the other and
-        back: the mean of n exchanges (a pause of either thread by the host
-        shows as an outlier of microseconds)."""
+        back: the mean of n exchanges, timed from the end of ``WARM`` first
+        ones, so that the partner thread's wake-up is not in it (it was until
+        2026-12-05: "late" round trips of 0.7-8 us, ``LATE_NS``).  A pause of
+        either thread by the host within the exchanges still shows as an
+        outlier of microseconds."""
         self._word[0] = 0
+        other = self._ex.submit(volley, self._word, 1, WARM + n, 0)
+        volley(self._word, 0, WARM, 0)  # returns once the partner is exchanging
         t0 = time.perf_counter()
-        other = self._ex.submit(volley, self._word, 1, n)
-        volley(self._word, 0, n)
+        volley(self._word, 0, n, WARM)
+        dt = time.perf_counter() - t0
         other.result()
-        return (time.perf_counter() - t0) / n * 1e9
+        return dt / n * 1e9
 
     def measure(self):
         """(chain, gather, alu, handoff): 2 x (one thread's time) / (two threads'
