@@ -48,9 +48,9 @@ one thread's worth; and ``handoff_ns``, a cache line's round trip between
 the threads (ns).  ``clear(probes)``: did the host leave two full cores at
 that probe (each of the three rates at least ``TWO_CORES``)?  ``near(probes)``:
 was the round trip below ``FAR_NS``?  ``far(probes)``: was it at least
-``FAR_NS`` and below ``LATE_NS`` (the threads' cores far apart), not a partner
-thread woken late (at least ``LATE_NS``: its wake-up, at the start of the
-exchanges, spread over them)?
+``FAR_NS`` and below ``LATE_NS`` (the threads' cores far apart)?  Longer is
+*late*: a thread the host paused during the exchanges (until 2026-12-05 also
+the partner thread's wake-up, which the timing then included), no distance.
 """
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -222,6 +222,6 @@ def near(probes):
 
 def far(probes):
     """Were the two threads far apart at a probe: a round trip of at least
-    ``FAR_NS`` but below ``LATE_NS`` (longer: a partner woken late, which says
-    nothing of the distance)?"""
+    ``FAR_NS`` but below ``LATE_NS`` (longer: a thread paused by the host,
+    which says nothing of the distance)?"""
     return FAR_NS <= probes[3] < LATE_NS

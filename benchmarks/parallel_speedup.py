@@ -46,10 +46,10 @@ they run, from the probe alone.  The host line also gives the median time
 of a cache line's round trip between two threads (``handoff_ns``), and
 each case's last line splits the paired median by the round trip measured
 just before the 2-thread engine's step (``host_probe.near``: below
-``FAR_NS``, 250 ns; the host switches between about 150 and about 450 ns
+``FAR_NS``, 250 ns; the host switches between about 90 and about 350 ns
 every few minutes, and the pool's events cost far more at the long one),
-apart from the steps whose probe's partner thread started late (a round trip
-of ``LATE_NS``, 700 ns, or more: ``host_probe.far``).
+apart from the steps whose probe the host paused (a round trip of
+``LATE_NS``, 700 ns, or more: ``host_probe.far``).
 The JSON (``--out``) holds every step's time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
@@ -400,7 +400,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 # split by the round trip just before this engine's step (the
                 # sequential engine's one thread hands nothing across: its events
                 # cost the same at either level, host_probe): near, far, and a
-                # probe whose partner thread started late (no distance measured)
+                # probe the host paused (no distance measured)
                 "speedup_paired_near": over(near_at[label]),
                 "speedup_paired_far": over(far_at[label]),
                 "speedup_paired_late": over([not (a or b) for a, b in
@@ -509,8 +509,8 @@ def main():
               f"steps; {nr[1]['speedup_paired_far']:.2f}x over the {nr[1]['far_steps']} "
               f"after a longer one, below {LATE_NS:.0f} ns (the threads' cores far apart); "
               f"{nr[1]['speedup_paired_late']:.2f}x over the "
-              f"{n_all - nr[1]['near_steps'] - nr[1]['far_steps']} whose probe's partner "
-              f"thread started late")
+              f"{n_all - nr[1]['near_steps'] - nr[1]['far_steps']} whose probe the host "
+              f"paused")
     print(f"benchmark wall time {time.perf_counter() - t0:.0f} s")
     if args.out:
         with open(args.out, "w") as fh:
