@@ -133,19 +133,23 @@ def say(msg):
 
 def parse_locks(text):
     """[(kind, scale, merge_far, schedule)] from
-    'graph:4,graph:4:unmerged,graph:4:auto,grid,pool:8' (auto: ``schedule="auto"``,
-    a step's events on one thread when that measured faster; pool:K:
-    ``schedule="pool"`` with K domains, the scale slot holding K)."""
+    'graph:4,graph:4:unmerged,graph:4:auto,grid,pool:8,pool:8:home' (auto:
+    ``schedule="auto"``, a step's events on one thread when that measured
+    faster; pool:K: ``schedule="pool"`` with K domains, the scale slot holding
+    K; pool:K:home: with domains cut by work and claimed by their own thread
+    first, ``Engine.pool_split = "work"``, ``pool_claim = "home"``)."""
     out = []
     for item in text.split(","):
         kind, _, rest = item.partition(":")
         scale, _, flag = rest.partition(":")
-        if kind == "pool" and not flag:
-            out.append(("pool", float(scale) if scale else 8.0, True, "pool"))
+        if kind == "pool" and flag in ("", "home"):
+            out.append(("pool", float(scale) if scale else 8.0, True,
+                        "pool:home" if flag else "pool"))
             continue
         if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged", "auto"):
             raise SystemExit(f"--locks: unknown lock {item!r} (graph:SCALE, "
-                             "graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d, pool:K)")
+                             "graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d, pool:K, "
+                             "pool:K:home)")
         out.append((kind, float(scale) if scale else 4.0, flag != "unmerged",
                     "auto" if flag == "auto" else "parallel"))
     return out
@@ -285,10 +289,14 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     sc = load_case(name, n, bed_code, bed_steps, bed_ranks)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
-        if schedule == "pool":  # K domains shared by the two threads
-            label = f"2 threads pool {int(scale)} domains"
+        if schedule.startswith("pool"):  # K domains shared by the two threads
+            home = schedule == "pool:home"
+            label = f"2 threads pool {int(scale)} domains" + (" home" if home else "")
             engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool")
             engines[label].pool_domains = int(scale)
+            if home:
+                engines[label].pool_split = "work"
+                engines[label].pool_claim = "home"
             continue
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
             "" if merge else " unmerged") + (" auto" if schedule == "auto" else "")
@@ -469,7 +477,7 @@ def main():
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8",
-                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K, ... "
+                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K[:home], ... "
                          "(graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8)")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()

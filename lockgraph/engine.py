@@ -28,7 +28,7 @@ from . import kernels as K
 from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
-from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state
+from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state, work_split
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -267,8 +267,9 @@ class Engine:
         threads or the calling thread alone, whichever measured faster lately
         (``schedule.EventSchedule``; the result is the same bit for bit).  The
         other phases of a step run on all threads either way.  "pool" (exact
-        policy): ``pool_domains`` domains (4 a thread by default) that any free
-        thread takes, events waiting by particle (``lockgraph/pool.py``);
+        policy): ``pool_domains`` domains (4 a thread by default) that the
+        threads take in turn, events waiting by particle (``lockgraph/pool.py``;
+        how the domains are cut and claimed: ``pool_split``, ``pool_claim``);
         ``lock`` and ``scale`` are not used.
     window_events : float — how far an interior event may run ahead of the
         other threads' domains, in units of a domain's mean time between events.
@@ -339,6 +340,9 @@ class Engine:
         self.merge_far = True
         # schedule "pool": domains shared by the threads (an attribute, like merge_far)
         self.pool_domains = 4 * self.threads
+        self.pool_split = "tree"
+        self.pool_claim = "earliest"
+        self._pool_cuts = None  # (dlo, dhi): the last pool step's work_split
         # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``)
         self.pool_checked_steps = 0
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
@@ -846,7 +850,7 @@ class Engine:
             else:
                 # each domain's first events, then the domain's queue
                 nd = self._pool_count() if self.schedule == "pool" else self.threads
-                dlo, dhi = self._domains(nd)
+                dlo, dhi = self._pool_ranges(nd) if self.schedule == "pool" else self._domains(nd)
                 q = tournament_size(int((dhi - dlo).max()))
                 dtour_t = cache_aligned((nd, 2 * q), np.float64, np.inf)
                 dtour_s = cache_aligned((nd, 2 * q), np.int32, -1)
@@ -881,6 +885,13 @@ class Engine:
                 self._rollback()  # interrupted or a worker failed: undo the step
                 self.ctr[K.LCOUNT] = log_start
                 raise
+            if status == K.OK and self.schedule == "pool" and self._pool_split == "work":
+                # the next step's domains, from this step's collisions per slot (the
+                # storage order moves little from one step to the next)
+                nd = self._pool_count()
+                cuts = (np.empty(nd, np.int64), np.empty(nd, np.int64))
+                work_split(self.cis, cuts[0], cuts[1])
+                self._pool_cuts = cuts
             took = time.perf_counter() - began
             spent += took
             self.phase_s[PH_EVENTS] += took
@@ -1061,6 +1072,45 @@ class Engine:
         dhi = np.array([r[1] for r in ranges], np.int64)
         return dlo, dhi
 
+    @property
+    def pool_split(self):
+        """How schedule "pool" cuts a step's slots into domains: "work" (default)
+        into the kD-tree's nodes of one depth (default: equal counts of
+        particles), or "work" into runs of about equal work, by each
+        particle's collisions in the last step (``pool.work_split``; the
+        first step, and a changed domain count, as "tree").  On the 50,000-grain bed the tree's lower
+        half held 75-84 % of a step's collisions."""
+        return self._pool_split
+
+    @pool_split.setter
+    def pool_split(self, value):
+        if value not in ("work", "tree"):
+            raise InputError("pool_split", f"must be 'work' or 'tree' (got {value!r})")
+        self._pool_split = value
+
+    @property
+    def pool_claim(self):
+        """Which free domain a thread of schedule "pool" claims: "earliest"
+        (default) the one with the earliest clock, or "home" the earliest of
+        its own share of the domains in slot order (``pool.home_range``)
+        and, only when none of those can run, the earliest of all.  Staying on its own
+        domains keeps a thread on the particles it touched last (README,
+        Benchmarks: "Own domains")."""
+        return self._pool_claim
+
+    @pool_claim.setter
+    def pool_claim(self, value):
+        if value not in ("home", "earliest"):
+            raise InputError("pool_claim", f"must be 'home' or 'earliest' (got {value!r})")
+        self._pool_claim = value
+
+    def _pool_ranges(self, nd):
+        """The slot ranges of the pool's nd domains this step (``pool_split``)."""
+        cuts = self._pool_cuts
+        if self._pool_split == "work" and cuts is not None and len(cuts[0]) == nd:
+            return cuts[0].copy(), cuts[1].copy()
+        return self._domains(nd)
+
     def _pool_count(self):
         """The pool's domains: ``pool_domains`` rounded down to a power of two
         (tree nodes of one depth), at most ``pool.MAX_DOMAINS`` and N."""
@@ -1080,7 +1130,8 @@ class Engine:
         try:
             return self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
                                     self.workers.run_pool(bundles, stt, locks, pst, queues,
-                                                          pctl, window))
+                                                          pctl, window,
+                                                          self._pool_claim == "home"))
         finally:
             self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
 

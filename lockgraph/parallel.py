@@ -62,6 +62,7 @@ from .neighbors import LCOUNT
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
 NOWAIT = 18  # tests: nonzero makes pool events run without waiting (its checks alone order them)
+HOME = 19  # pool: nonzero makes a thread claim its own domains first (``pool._claim``)
 NCTRL = 24
 # per-domain row of dctl: the lock, the clock (read by the other threads at
 # every boundary event) and what only termination and stall checks read (in
@@ -833,17 +834,19 @@ class Workers:
             self.wall_s += time.perf_counter() - t0
         return int(self.ctrl[STATUS])
 
-    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window):
+    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window, home=False):
         """``schedule="pool"``: run ``pool.pool_worker`` on every thread until the
         step's events are done or one stops with a status; returns that status.
         ``pctl`` (domains x ``pool.NPCTL``, cache-aligned) keeps each domain's
         latest event time across calls within a step (a call after a grown
-        journal resumes the step); its clocks and owners are set here."""
+        journal resumes the step); its clocks and owners are set here.
+        ``home``: each thread claims its own domains first (``Engine.pool_claim``)."""
         from .pool import NTCTL, PCLOCK, PHIGH, PINFL, POWNER, PSETTLE
 
         self.ctrl[:] = 0
         self.ctrl[JITTER] = self.jitter
         self.ctrl[NOWAIT] = int(self.no_wait)
+        self.ctrl[HOME] = int(home)
         dlo, dhi, dtour_t, dtour_s = doms
         pc = pctl.reshape(-1)
         npc = pctl.shape[1]

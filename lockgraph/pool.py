@@ -56,6 +56,16 @@ already in flight elsewhere has committed (``_settle``: each of those reads
 the marks again at its commit, and has published its times before this one
 checks).
 
+**Which domain, cut how.**  By default a free thread claims the free domain
+with the earliest clock, and the domains are the tree's nodes of one depth.
+``Engine.pool_claim = "home"`` makes each thread claim among its own share
+of the domains in slot order first (``home_range``), and ``Engine.pool_split
+= "work"`` cuts the slots into runs of about equal work by the last step's
+collisions (``work_split``): a thread then stays on the particles it touched
+last, which pays when the two threads' cores are far apart (separate
+caches) and costs a few per cent when they are near (README, Benchmarks:
+"Own domains").
+
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner and progress; on a fourth its latest event time) and ``tctl``
 per thread (in flight).
@@ -70,7 +80,7 @@ from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_C
                       S_REACHOUT, S_VIOL, STALL, VIOLATION, hop2, init_range, journal_room,
                       process_event)
 from .neighbors import LCOUNT
-from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
+from .parallel import (ABORT, HOME, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
                        next_task, wait_blocked)
 from .predict import INF
 
@@ -184,13 +194,13 @@ def _others_clock(dctl, d, ndom):
 
 
 @kernel(inline=True)
-def _claim(dctl, ndom, me, dtb, tried):
-    """Claim the free domain with the earliest clock before the step end that
-    is not in the mask ``tried``; -1 if there is none or another thread took
-    it first."""
+def _claim_in(dctl, lo, hi, me, dtb, tried):
+    """Claim the free domain of lo..hi-1 with the earliest clock before the
+    step end that is not in the mask ``tried``; -1 if there is none or
+    another thread took it first."""
     best = -1
     bc = dtb
-    for e in range(ndom):
+    for e in range(lo, hi):
         if (tried >> e) & 1 == 0 and load(dctl, e * NPCTL + POWNER) == -1:
             c = load(dctl, e * NPCTL + PCLOCK)
             if c < bc:
@@ -199,6 +209,55 @@ def _claim(dctl, ndom, me, dtb, tried):
     if best >= 0 and cas(dctl, best * NPCTL + POWNER, -1, me) == -1:
         return best
     return -1
+
+
+@kernel(inline=True)
+def _claim(dctl, ndom, me, nthr, dtb, tried, home):
+    """Claim a domain (``_claim_in``): with ``home``, among the thread's own
+    domains (``home_range``) first, then among all."""
+    if home:
+        lo, hi = home_range(me, nthr, ndom)
+        c = _claim_in(dctl, lo, hi, me, dtb, tried)
+        if c >= 0:
+            return c
+    return _claim_in(dctl, 0, ndom, me, dtb, tried)
+
+
+@kernel(inline=True)
+def home_range(me, nthr, ndom):
+    """Thread ``me`` of ``nthr``'s own domains: lo..hi-1, its share of the
+    domains in slot order (a spatial block; with ``work_split``'s domains,
+    about 1/nthr of the last step's collisions)."""
+    return me * ndom // nthr, (me + 1) * ndom // nthr
+
+
+@kernel
+def work_split(cis, dlo, dhi):
+    """Cut the slots 0..N-1 into len(dlo) runs of about equal work, a slot's
+    work being its collisions in the step just run (``cis``) plus one: run q
+    ends at the first slot whose running sum reaches q/len(dlo) of the total
+    (integer sums, so exact).  A slot heavier than a run leaves runs empty."""
+    n = cis.shape[0]
+    nd = dlo.shape[0]
+    total = np.int64(0)
+    for s in range(n):
+        total += cis[s] + 1
+    acc = np.int64(0)
+    q = 1
+    dlo[0] = 0
+    for s in range(n):
+        if q >= nd:
+            break
+        acc += cis[s] + 1
+        while q < nd and acc * nd >= total * q:
+            dhi[q - 1] = s + 1
+            dlo[q] = s + 1
+            q += 1
+    while q < nd:  # only without slots (n = 0)
+        dhi[q - 1] = n
+        dlo[q] = n
+        q += 1
+    dhi[nd - 1] = n
 
 
 @kernel(inline=True)
@@ -299,6 +358,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     seen = -1
     rng = load(ctrl, JITTER) * (2 * me + 1)
     nowait = load(ctrl, NOWAIT) != 0
+    home = load(ctrl, HOME) != 0
     d = 0
     i = 0
     p = -1
@@ -323,7 +383,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 return OK
             blocked = True
         if not blocked and cur < 0:
-            cur = _claim(dctl, ndom, me, dtb, tried)
+            cur = _claim(dctl, ndom, me, nthr, dtb, tried, home)
             if cur < 0:
                 if tried != 0:
                     # every free domain was tried since the last event or wait:

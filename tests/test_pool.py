@@ -21,7 +21,7 @@ from lockgraph.engine import Engine
 from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
-from lockgraph.pool import clear_words, pool_state
+from lockgraph.pool import clear_words, home_range, pool_state, work_split
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -44,6 +44,67 @@ def test_pool_equals_sequential(sequential, name, which, domains, threads):
     sc, want_hash, want_seq = sequential(name, which)
     assert len(want_seq) > 20
     steps_match(pool_engine(sc, domains, threads), STEPS[name], want_hash, want_seq)
+
+
+@pytest.mark.parametrize("split,claim", [("work", "home"), ("work", "earliest"),
+                                         ("tree", "home")])
+@pytest.mark.parametrize("threads", [2, 3])
+@pytest.mark.parametrize("name", ["ring", "dish_marble"])
+def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, split, claim):
+    """Domains cut by work (from the second step on) and threads that claim
+    their own domains first: still the sequential result."""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = pool_engine(sc, 4, threads)
+    eng.pool_split = split
+    eng.pool_claim = claim
+    steps_match(eng, STEPS[name], want_hash, want_seq)
+    assert (eng._pool_cuts is not None) == (split == "work")  # the work split was used
+
+
+def work_split_by_brute_force(cis, nd):
+    """Run q ends at the first m whose sum of (cis + 1) over slots < m reaches
+    q/nd of the total (compared as integers)."""
+    w = cis.astype(np.int64) + 1
+    total = int(w.sum())
+    cuts = []
+    for q in range(1, nd):
+        m = next((m for m in range(1, len(w) + 1) if int(w[:m].sum()) * nd >= total * q),
+                 len(w))
+        cuts.append(m)
+    return np.array([0] + cuts), np.array(cuts + [len(w)])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_work_split_matches_brute_force(seed):
+    """``work_split`` against the definition, on slots with no collisions, a
+    few, and single slots heavier than a whole run (which leave runs empty);
+    the runs tile the slots in order, and each holds at most its share plus
+    one slot's work."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    cis = rng.integers(0, 5, n).astype(np.int32) * (rng.random(n) < 0.7)
+    if seed % 2:
+        cis[rng.integers(0, n, 2)] = rng.integers(100, 3000, 2)
+    for nd in (1, 2, 3, 8, 16):
+        dlo = np.full(nd, -7, np.int64)
+        dhi = np.full(nd, -7, np.int64)
+        work_split(cis.astype(np.int32), dlo, dhi)
+        want_lo, want_hi = work_split_by_brute_force(cis, nd)
+        assert np.array_equal(dlo, want_lo) and np.array_equal(dhi, want_hi)
+        assert dlo[0] == 0 and dhi[-1] == n and np.array_equal(dlo[1:], dhi[:-1])
+        w = cis.astype(np.int64) + 1
+        for a, b in zip(dlo, dhi):
+            assert int(w[a:b].sum()) <= w.sum() / nd + w.max()
+
+
+def test_home_ranges_tile_the_domains():
+    """Each thread's own domains: consecutive shares that cover every domain once."""
+    for nthr in (1, 2, 3, 4):
+        for nd in (1, 2, 4, 7, 16, 63):
+            got = [home_range(me, nthr, nd) for me in range(nthr)]
+            assert got[0][0] == 0 and got[-1][1] == nd
+            assert all(got[k][1] == got[k + 1][0] for k in range(nthr - 1))
+            assert all(hi - lo in (nd // nthr, -(-nd // nthr)) for lo, hi in got)
 
 
 @pytest.mark.parametrize("name", sorted(SMALL))
@@ -270,6 +331,16 @@ def test_pool_statistics_and_options():
     ph = Physics(PeriodicCube(12.0), (), Constant(1.0))
     with pytest.raises(InputError, match="^schedule: 'pool' .* no 'paper' policy"):
         Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
+    eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
+    try:
+        assert (eng.pool_split, eng.pool_claim) == ("tree", "earliest")
+        with pytest.raises(InputError, match="^pool_split: must be 'work' or 'tree'"):
+            eng.pool_split = "equal"
+        with pytest.raises(InputError, match="^pool_claim: must be 'home' or 'earliest'"):
+            eng.pool_claim = None
+        assert (eng.pool_split, eng.pool_claim) == ("tree", "earliest")
+    finally:
+        eng.close()
 
 
 def test_pool_arrays_kept_across_steps_carry_nothing_over():
