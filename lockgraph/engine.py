@@ -1074,12 +1074,13 @@ class Engine:
 
     @property
     def pool_split(self):
-        """How schedule "pool" cuts a step's slots into domains: "work" (default)
-        into the kD-tree's nodes of one depth (default: equal counts of
+        """How schedule "pool" cuts a step's slots into domains: "tree"
+        (default) into the kD-tree's nodes of one depth (equal counts of
         particles), or "work" into runs of about equal work, by each
         particle's collisions in the last step (``pool.work_split``; the
-        first step, and a changed domain count, as "tree").  On the 50,000-grain bed the tree's lower
-        half held 75-84 % of a step's collisions."""
+        first step, and a changed domain count, as "tree").  On the
+        50,000-grain bed the first half of the tree's slots held 75-84 % of
+        a step's collisions."""
         return self._pool_split
 
     @pool_split.setter
@@ -1093,9 +1094,9 @@ class Engine:
         """Which free domain a thread of schedule "pool" claims: "earliest"
         (default) the one with the earliest clock, or "home" the earliest of
         its own share of the domains in slot order (``pool.home_range``)
-        and, only when none of those can run, the earliest of all.  Staying on its own
-        domains keeps a thread on the particles it touched last (README,
-        Benchmarks: "Own domains")."""
+        and, only when none of those can run, the earliest of all.  Staying
+        on its own domains keeps a thread on the particles it touched last
+        (README, Benchmarks: "Own domains")."""
         return self._pool_claim
 
     @pool_claim.setter
