@@ -62,9 +62,9 @@ with the earliest clock, and the domains are the tree's nodes of one depth.
 of the domains in slot order first (``home_range``), and ``Engine.pool_split
 = "work"`` cuts the slots into runs of about equal work by the last step's
 collisions (``work_split``): a thread then stays on the particles it touched
-last, which pays when the two threads' cores are far apart (separate
-caches) and costs a few per cent when they are near (README, Benchmarks:
-"Own domains").
+last.  Measured on the 50,000-grain bed: 0-16 % faster in the minutes the
+two threads' cores are far apart (separate caches), 1-6 % slower when they
+are near (README, Benchmarks: "Own domains"); so not the default.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner and progress; on a fourth its latest event time) and ``tctl``
