@@ -235,6 +235,28 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
     return 0
 
 
+class _Option:
+    """An engine attribute that holds one of a few strings (REBOUND-style: an
+    unknown value raises an InputError naming the attribute, and the value
+    is kept)."""
+
+    def __init__(self, *options):
+        self.options = options
+
+    def __set_name__(self, owner, name):
+        self.name = name
+        self.slot = "_" + name
+
+    def __get__(self, obj, objtype=None):
+        return self if obj is None else getattr(obj, self.slot)
+
+    def __set__(self, obj, value):
+        if value not in self.options:
+            raise InputError(self.name, "must be " + " or ".join(map(repr, self.options))
+                             + f" (got {value!r})")
+        setattr(obj, self.slot, value)
+
+
 class Engine:
     """Sequential event-driven hard-sphere engine working on a private copy of a state.
 
@@ -284,6 +306,20 @@ class Engine:
         scheduling replay (sequential runs only): every event's particles, time
         and cost, and each step's lock regions for each listed lock structure.
     """
+
+    # How schedule "pool" cuts a step's slots into domains: "tree" (default)
+    # into the kD-tree's nodes of one depth (equal counts of particles), or
+    # "work" into runs of about equal work by each particle's collisions in
+    # the last step (``pool.work_split``; the first step, and a changed
+    # domain count, as "tree").  On the 50,000-grain bed the first half of
+    # the tree's slots held 75-84 % of a step's collisions.
+    pool_split = _Option("work", "tree")
+    # Which free domain a pool thread claims: "earliest" (default) the one
+    # with the earliest clock, or "home" the earliest of its own share of the
+    # domains in slot order (``pool.home_range``) and, only when none of
+    # those can run, the earliest of all: a thread then stays on the
+    # particles it touched last (README, Benchmarks: "Own domains").
+    pool_claim = _Option("home", "earliest")
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
@@ -1072,44 +1108,11 @@ class Engine:
         dhi = np.array([r[1] for r in ranges], np.int64)
         return dlo, dhi
 
-    @property
-    def pool_split(self):
-        """How schedule "pool" cuts a step's slots into domains: "tree"
-        (default) into the kD-tree's nodes of one depth (equal counts of
-        particles), or "work" into runs of about equal work, by each
-        particle's collisions in the last step (``pool.work_split``; the
-        first step, and a changed domain count, as "tree").  On the
-        50,000-grain bed the first half of the tree's slots held 75-84 % of
-        a step's collisions."""
-        return self._pool_split
-
-    @pool_split.setter
-    def pool_split(self, value):
-        if value not in ("work", "tree"):
-            raise InputError("pool_split", f"must be 'work' or 'tree' (got {value!r})")
-        self._pool_split = value
-
-    @property
-    def pool_claim(self):
-        """Which free domain a thread of schedule "pool" claims: "earliest"
-        (default) the one with the earliest clock, or "home" the earliest of
-        its own share of the domains in slot order (``pool.home_range``)
-        and, only when none of those can run, the earliest of all.  Staying
-        on its own domains keeps a thread on the particles it touched last
-        (README, Benchmarks: "Own domains")."""
-        return self._pool_claim
-
-    @pool_claim.setter
-    def pool_claim(self, value):
-        if value not in ("home", "earliest"):
-            raise InputError("pool_claim", f"must be 'home' or 'earliest' (got {value!r})")
-        self._pool_claim = value
-
     def _pool_ranges(self, nd):
         """The slot ranges of the pool's nd domains this step (``pool_split``)."""
         cuts = self._pool_cuts
         if self._pool_split == "work" and cuts is not None and len(cuts[0]) == nd:
-            return cuts[0].copy(), cuts[1].copy()
+            return cuts  # fresh arrays each step, read only
         return self._domains(nd)
 
     def _pool_count(self):
