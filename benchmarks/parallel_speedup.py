@@ -137,19 +137,22 @@ def parse_locks(text):
     ``schedule="auto"``, a step's events on one thread when that measured
     faster; pool:K: ``schedule="pool"`` with K domains, the scale slot holding
     K; pool:K:home: with domains cut by work and claimed by their own thread
-    first, ``Engine.pool_split = "work"``, ``pool_claim = "home"``)."""
+    first, ``Engine.pool_split = "work"``, ``pool_claim = "home"``;
+    pool:K:earliest: any thread claims any domain, ``pool_claim = "earliest"``
+    (the default until 2026-12-05; pool:K itself claims by ``"band"``: each
+    thread its own run of domains and those next to it)."""
     out = []
     for item in text.split(","):
         kind, _, rest = item.partition(":")
         scale, _, flag = rest.partition(":")
-        if kind == "pool" and flag in ("", "home"):
+        if kind == "pool" and flag in ("", "home", "earliest"):
             out.append(("pool", float(scale) if scale else 8.0, True,
-                        "pool:home" if flag else "pool"))
+                        "pool:" + flag if flag else "pool"))
             continue
         if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged", "auto"):
             raise SystemExit(f"--locks: unknown lock {item!r} (graph:SCALE, "
                              "graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d, pool:K, "
-                             "pool:K:home)")
+                             "pool:K:home, pool:K:earliest)")
         out.append((kind, float(scale) if scale else 4.0, flag != "unmerged",
                     "auto" if flag == "auto" else "parallel"))
     return out
@@ -290,13 +293,15 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
         if schedule.startswith("pool"):  # K domains shared by the two threads
-            home = schedule == "pool:home"
-            label = f"2 threads pool {int(scale)} domains" + (" home" if home else "")
+            flag = schedule.partition(":")[2]
+            label = f"2 threads pool {int(scale)} domains" + (" " + flag if flag else "")
             engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool")
             engines[label].pool_domains = int(scale)
-            if home:
+            if flag == "home":
                 engines[label].pool_split = "work"
                 engines[label].pool_claim = "home"
+            elif flag == "earliest":
+                engines[label].pool_claim = "earliest"
             continue
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
             "" if merge else " unmerged") + (" auto" if schedule == "auto" else "")
@@ -477,7 +482,7 @@ def main():
     ap.add_argument("--steps", type=int, default=5, help="steps per repeat (5)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--locks", default="graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8",
-                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K[:home], ... "
+                    help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K[:home|:earliest], ... "
                          "(graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8)")
     ap.add_argument("--out", help="write the results as JSON")
     args = ap.parse_args()

@@ -28,7 +28,8 @@ from . import kernels as K
 from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
-from .pool import MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, init_domains, pool_state, work_split
+from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, PPROG, claim_masks, init_domains,
+                   pool_state, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -314,12 +315,16 @@ class Engine:
     # domain count, as "tree").  On the 50,000-grain bed the first half of
     # the tree's slots held 75-84 % of a step's collisions.
     pool_split = _Option("work", "tree")
-    # Which free domain a pool thread claims: "earliest" (default) the one
-    # with the earliest clock, or "home" the earliest of its own share of the
-    # domains in slot order (``pool.home_range``) and, only when none of
-    # those can run, the earliest of all: a thread then stays on the
-    # particles it touched last (README, Benchmarks: "Own domains").
-    pool_claim = _Option("home", "earliest")
+    # Which free domain a pool thread claims (``pool.claim_masks``): "band"
+    # (default since 2026-12-05) the earliest of its own run of domains (cut
+    # at equal shares of the last step's events) and, only when none of
+    # those can run, of the domains next to that run, never others: the
+    # particles inside a run stay with one thread (README, Benchmarks: "Band
+    # claims"); "earliest" the one with the earliest clock; "home" the
+    # earliest of its own share of the domains in slot order
+    # (``pool.home_range``) and, only when none of those can run, the
+    # earliest of all (README, Benchmarks: "Own domains").
+    pool_claim = _Option("band", "earliest", "home")
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
@@ -377,7 +382,11 @@ class Engine:
         # schedule "pool": domains shared by the threads (an attribute, like merge_far)
         self.pool_domains = 4 * self.threads
         self.pool_split = "tree"
-        self.pool_claim = "earliest"
+        self.pool_claim = "band"
+        # the pool's last step: each domain's events (``claim_masks``'s work),
+        # and this step's domain adjacency (filled by ``init_domains``)
+        self._pool_work = None
+        self._pool_adj = np.zeros(0, np.int64)
         self._pool_cuts = None  # (dlo, dhi): the last pool step's work_split
         # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``)
         self.pool_checked_steps = 0
@@ -900,9 +909,12 @@ class Engine:
                     pst, locks = pool_state(self.n, nd, self.threads, self._pool_keep)
                     hops, wt, sdom = pst[:3]
                     claim = self._claim_word()
+                    # "band" claims by domain adjacency, worked out with the first events
+                    self._pool_adj = adj = np.zeros(nd if self._pool_claim == "band" else 0,
+                                                    np.int64)
                     self._pmap(init_domains, [
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s) for k in range(self.threads)])
+                         dlo, dhi, dtour_t, dtour_s, adj) for k in range(self.threads)])
                 else:
                     self._claimed(K.init_range, nd, lambda d, k: (
                         parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d], dtour_t[d],
@@ -1127,17 +1139,21 @@ class Engine:
         filled with the first events (``pool.init_domain``)."""
         dlo, dhi, dtour_t, dtour_s = queues
         nd = len(dlo)
-        pctl = cache_aligned((nd + 1, NPCTL), np.int64)  # and the step's row (PCHECKED)
+        # and the step's row (PCHECKED), and the threads' claim masks
+        pctl = cache_aligned((nd + 1 + self.threads, NPCTL), np.int64)
         pctl[:, PHIGH] = -1
+        work = self._pool_work if self._pool_work is not None and len(self._pool_work) == nd \
+            else None
+        masks = claim_masks(self._pool_claim, nd, self.threads, self._pool_adj, work)
         per_domain = max(self.last_events / nd, 1.0)
         window = self.workers.window_events * self.dt / per_domain
         try:
             return self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
                                     self.workers.run_pool(bundles, stt, locks, pst, queues,
-                                                          pctl, window,
-                                                          self._pool_claim == "home"))
+                                                          pctl, window, masks))
         finally:
             self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
+            self._pool_work = pctl[:nd, PPROG].copy()
 
     @staticmethod
     def _add_rows(st, stt):

@@ -62,7 +62,6 @@ from .neighbors import LCOUNT
 G, ABORT, STATUS = 0, 8, 16
 JITTER = 17  # tests: a nonzero seed makes the workers pause at random (fault injection)
 NOWAIT = 18  # tests: nonzero makes pool events run without waiting (its checks alone order them)
-HOME = 19  # pool: nonzero makes a thread claim its own domains first (``pool._claim``)
 NCTRL = 24
 # per-domain row of dctl: the lock, the clock (read by the other threads at
 # every boundary event) and what only termination and stall checks read (in
@@ -834,19 +833,20 @@ class Workers:
             self.wall_s += time.perf_counter() - t0
         return int(self.ctrl[STATUS])
 
-    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window, home=False):
+    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window, masks):
         """``schedule="pool"``: run ``pool.pool_worker`` on every thread until the
         step's events are done or one stops with a status; returns that status.
         ``pctl`` (domains x ``pool.NPCTL``, cache-aligned) keeps each domain's
         latest event time across calls within a step (a call after a grown
-        journal resumes the step); its clocks and owners are set here.
-        ``home``: each thread claims its own domains first (``Engine.pool_claim``)."""
-        from .pool import NTCTL, PCLOCK, PHIGH, PINFL, POWNER, PSETTLE
+        journal resumes the step); its clocks and owners are set here, and
+        after the domains' rows and the step's row, a row per thread: the
+        domains it claims first and those it may claim (``masks``, from
+        ``pool.claim_masks``)."""
+        from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PSETTLE
 
         self.ctrl[:] = 0
         self.ctrl[JITTER] = self.jitter
         self.ctrl[NOWAIT] = int(self.no_wait)
-        self.ctrl[HOME] = int(home)
         dlo, dhi, dtour_t, dtour_s = doms
         pc = pctl.reshape(-1)
         npc = pctl.shape[1]
@@ -857,6 +857,8 @@ class Workers:
         pctl[:nd, PINFL] = np.float64(np.inf).view(np.int64)
         pctl[:nd, POWNER] = -1
         pctl[:nd, PSETTLE] = 0
+        pctl[nd + 1:, POWN] = masks[0]
+        pctl[nd + 1:, PALLOW] = masks[1]
         if isinstance(self.fault, tuple) and self.fault[0] == "stall":
             pctl[0, POWNER] = 1 << 20  # taken before any worker can (hold_until_abort)
         tctl = cache_aligned((self.threads * NTCTL,), np.int64)

@@ -56,18 +56,26 @@ already in flight elsewhere has committed (``_settle``: each of those reads
 the marks again at its commit, and has published its times before this one
 checks).
 
-**Which domain, cut how.**  By default a free thread claims the free domain
-with the earliest clock, and the domains are the tree's nodes of one depth.
-``Engine.pool_claim = "home"`` makes each thread claim among its own share
-of the domains in slot order first (``home_range``), and ``Engine.pool_split
-= "work"`` cuts the slots into runs of about equal work by the last step's
-collisions (``work_split``): a thread then stays on the particles it touched
-last.  Measured on the 50,000-grain bed: 0-16 % faster in the minutes the
-two threads' cores are far apart (separate caches), 1-6 % slower when they
-are near (README, Benchmarks: "Own domains"); so not the default.
+**Which domain, cut how.**  The domains are the tree's nodes of one depth;
+a free thread claims the free domain with the earliest clock among those
+its two masks let it (``claim_masks``, by ``Engine.pool_claim``): the
+domains it claims first and those it may claim at all.  ``"band"`` (the
+default): its own run of domains (cut at equal shares of the last step's
+events) first, then only the domains next to that run
+(``domain_adjacency``, worked out with the first events), so that the
+particles inside a run, away from its edge, are written by one thread
+only.  ``"earliest"``: any.  ``"home"``: its share of the domains in slot
+order first, then any.  ``Engine.pool_split = "work"`` cuts the slots into
+runs of about equal work by the last step's collisions (``work_split``).
+Measured on the 50,000-grain bed against ``"earliest"`` (README,
+Benchmarks: "Band claims" and "Own domains"): "band" 23-32 % faster in the
+minutes the two threads' cores are far apart (separate caches) and 1-5 %
+faster when they are near (the ring, N = 2e5: 1 % slower, the cost of the
+adjacency); "home" 0-16 % faster far and 1-6 % slower near.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
-third its owner and progress; on a fourth its latest event time) and ``tctl``
+third its owner and progress; on a fourth its latest event time), then the
+step's row and a row per thread (its claim masks, read only), and ``tctl``
 per thread (in flight).
 """
 import numpy as np
@@ -80,7 +88,7 @@ from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_BLOCKED, S_CLAIMS, S_C
                       S_REACHOUT, S_VIOL, STALL, VIOLATION, hop2, init_range, journal_room,
                       process_event)
 from .neighbors import LCOUNT
-from .parallel import (ABORT, HOME, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
+from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_aligned,
                        next_task, wait_blocked)
 from .predict import INF
 
@@ -94,6 +102,9 @@ NPCTL = 32
 # one row more after the domains' rows: nonzero once a pair found mid-step broke
 # the masks (counted by the engine: ``Engine.pool_checked_steps``)
 PCHECKED = 0
+# then a row per thread: the domains it claims first and those it may claim
+# (``claim_masks``), read once by its worker
+POWN, PALLOW = 0, 1
 NTCTL = 8  # per-thread row of tctl: in flight
 
 
@@ -120,12 +131,40 @@ def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, to
     init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s)
 
 
+@kernel(inline=True)
+def domain_of(dhi, s):
+    """The domain holding slot s: the first whose run ends after s."""
+    lo = 0
+    hi = dhi.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if dhi[mid] > s:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@kernel
+def domain_adjacency(noff, nent, dhi, d, lo, hi):
+    """The mask of the domains holding domain d (slots lo..hi-1) and the
+    step-start candidates of its slots."""
+    m = np.int64(1) << d
+    for s in range(lo, hi):
+        for k in range(noff[s], noff[s + 1]):
+            c = nent[k] >> 5
+            if c < lo or c >= hi:  # most candidates are in d: no search
+                m |= np.int64(1) << domain_of(dhi, c)
+    return m
+
+
 @kernel
 def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, dlo, dhi, dtour_t,
-                 dtour_s):
+                 dtour_s, adj):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
     (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
-    (``parallel.next_task``).  One call a thread, not one a domain: each
+    (``parallel.next_task``), and of the domains' ``domain_adjacency`` when
+    ``adj`` has a row for them.  One call a thread, not one a domain: each
     call from Python takes the GIL, and two threads taking it in turn wait
     for each other's wake-up."""
     nd = dlo.shape[0]
@@ -137,6 +176,8 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
             return 0
         init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
                     dtour_t[d], dtour_s[d])
+        if adj.shape[0] > 0:
+            adj[d] = domain_adjacency(nbrs[0], nbrs[1], dhi, d, dlo[d], dhi[d])
 
 
 @kernel(inline=True)
@@ -212,15 +253,15 @@ def _claim_in(dctl, lo, hi, me, dtb, tried):
 
 
 @kernel(inline=True)
-def _claim(dctl, ndom, me, nthr, dtb, tried, home):
-    """Claim a domain (``_claim_in``): with ``home``, among the thread's own
-    domains (``home_range``) first, then among all."""
-    if home:
-        lo, hi = home_range(me, nthr, ndom)
-        c = _claim_in(dctl, lo, hi, me, dtb, tried)
+def _claim(dctl, ndom, me, dtb, tried, own, allowed):
+    """Claim a domain (``_claim_in``): among the thread's own domains (mask
+    ``own``) first, then among those it may take (``allowed``, which holds
+    ``own``; see ``claim_masks``)."""
+    if own != allowed:
+        c = _claim_in(dctl, 0, ndom, me, dtb, tried | ~own)
         if c >= 0:
             return c
-    return _claim_in(dctl, 0, ndom, me, dtb, tried)
+    return _claim_in(dctl, 0, ndom, me, dtb, tried | ~allowed)
 
 
 @kernel(inline=True)
@@ -358,7 +399,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     seen = -1
     rng = load(ctrl, JITTER) * (2 * me + 1)
     nowait = load(ctrl, NOWAIT) != 0
-    home = load(ctrl, HOME) != 0
+    own = load(dctl, (ndom + 1 + me) * NPCTL + POWN)
+    allowed = load(dctl, (ndom + 1 + me) * NPCTL + PALLOW)
     d = 0
     i = 0
     p = -1
@@ -383,7 +425,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 return OK
             blocked = True
         if not blocked and cur < 0:
-            cur = _claim(dctl, ndom, me, nthr, dtb, tried, home)
+            cur = _claim(dctl, ndom, me, dtb, tried, own, allowed)
             if cur < 0:
                 if tried != 0:
                     # every free domain was tried since the last event or wait:
@@ -578,3 +620,41 @@ def pool_state(n, nd, threads, keep):
     seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
             cache_aligned((threads, width)))
     return (hops, wt, sdom, seen), locks
+
+
+def claim_masks(claim, nd, nthr, adj=None, work=None):
+    """Which of nd domains each of nthr pool threads claims first, and which
+    it may claim at all (``Engine.pool_claim``): ``(own, allowed)``, two
+    (nthr,) int64 arrays of domain masks, ``own`` within ``allowed``.
+
+    * ``"earliest"``: any domain (own = allowed = all).
+    * ``"home"``: its share of the domains in slot order (``home_range``)
+      first, then any.
+    * ``"band"``: its run of the domains in slot order, cut at equal shares
+      of ``work`` (nd,) (each domain's events in the last step; equal
+      without), and then only the domains next to that run: those holding a
+      step-start candidate of one of its slots (``adj`` (nd,): each domain's
+      ``domain_adjacency``).  A thread whose run is empty may claim any.
+      The particles inside a run away from its edge are then written by one
+      thread only.
+    """
+    full = (1 << nd) - 1
+    own = [full] * nthr
+    allowed = [full] * nthr
+    if claim == "home":
+        own = [sum(1 << d for d in range(*home_range(k, nthr, nd))) for k in range(nthr)]
+    elif claim == "band":
+        w = np.ones(nd, np.int64) if work is None else np.asarray(work, np.int64) + 1
+        cum = np.concatenate([[0], np.cumsum(w)])
+        # run k ends at the domain edge nearest k/nthr of the total (integers)
+        cut = [0] + [int(np.abs(cum * nthr - cum[-1] * k).argmin()) for k in range(1, nthr)]
+        cut = np.maximum.accumulate(cut + [nd])
+        for k in range(nthr):
+            own[k] = sum(1 << d for d in range(cut[k], cut[k + 1]))
+            near = own[k]
+            for d in range(cut[k], cut[k + 1]):
+                near |= int(adj[d])
+            allowed[k] = near if own[k] else full
+    elif claim != "earliest":
+        raise ValueError(f"unknown claim {claim!r}")
+    return (np.array(own, np.uint64).view(np.int64), np.array(allowed, np.uint64).view(np.int64))

@@ -21,7 +21,8 @@ from lockgraph.engine import Engine
 from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
-from lockgraph.pool import clear_words, home_range, pool_state, work_split
+from lockgraph.pool import (claim_masks, clear_words, domain_adjacency, domain_of, home_range,
+                            pool_state, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -47,7 +48,8 @@ def test_pool_equals_sequential(sequential, name, which, domains, threads):
 
 
 @pytest.mark.parametrize("split,claim", [("work", "home"), ("work", "earliest"),
-                                         ("tree", "home")])
+                                         ("tree", "home"), ("tree", "earliest"),
+                                         ("tree", "band"), ("work", "band")])
 @pytest.mark.parametrize("threads", [2, 3])
 @pytest.mark.parametrize("name", ["ring", "dish_marble"])
 def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, split, claim):
@@ -59,6 +61,9 @@ def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, spli
     eng.pool_claim = claim
     steps_match(eng, STEPS[name], want_hash, want_seq)
     assert (eng._pool_cuts is not None) == (split == "work")  # the work split was used
+    if claim == "band" and split == "tree":  # the last step's adjacency, by brute force
+        dlo, dhi = eng._pool_ranges(len(eng._pool_adj))
+        assert list(eng._pool_adj) == adjacency_by_brute_force(eng.noff, eng.nent, dlo, dhi)
 
 
 def work_split_by_brute_force(cis, nd):
@@ -95,6 +100,65 @@ def test_work_split_matches_brute_force(seed):
         w = cis.astype(np.int64) + 1
         for a, b in zip(dlo, dhi):
             assert int(w[a:b].sum()) <= w.sum() / nd + w.max()
+
+
+def adjacency_by_brute_force(noff, nent, dlo, dhi):
+    """Each domain's mask: itself and the domains of its slots' candidates."""
+    dom = np.repeat(np.arange(len(dlo)), np.asarray(dhi) - np.asarray(dlo))
+    out = []
+    for d, (a, b) in enumerate(zip(dlo, dhi)):
+        m = 1 << d
+        for s in range(a, b):
+            for k in range(noff[s], noff[s + 1]):
+                m |= 1 << int(dom[nent[k] >> 5])
+        out.append(m)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_domain_adjacency_matches_brute_force(seed):
+    """``domain_of`` and ``domain_adjacency`` on random candidate lists over
+    random runs of slots (empty runs included, up to 63 domains)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 400))
+    nd = int(rng.choice([1, 2, 5, 16, 63]))
+    cuts = np.sort(rng.integers(0, n + 1, nd - 1))
+    dlo = np.concatenate([[0], cuts]).astype(np.int64)
+    dhi = np.concatenate([cuts, [n]]).astype(np.int64)
+    cnt = rng.integers(0, 6, n)
+    noff = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
+    nent = (rng.integers(0, n, int(noff[-1])) << 5 | rng.integers(0, 27, int(noff[-1])))
+    nent = nent.astype(np.int32)
+    for s in range(n):
+        assert dlo[domain_of(dhi, s)] <= s < dhi[domain_of(dhi, s)]
+    got = [domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d]) for d in range(nd)]
+    assert got == adjacency_by_brute_force(noff, nent, dlo, dhi)
+
+
+def test_claim_masks():
+    """"earliest": every domain; "home": its share of the slot order first;
+    "band": its run at equal shares of the work (edges nearest k/T of the
+    total), then the domains next to it only; an empty run may claim any."""
+    full = (1 << 8) - 1
+    own, allowed = claim_masks("earliest", 8, 2)
+    assert list(own) == [full, full] and list(allowed) == [full, full]
+    own, allowed = claim_masks("home", 8, 3)
+    assert list(own) == [0b11, 0b11100, 0b11100000] and list(allowed) == [full] * 3
+    # eight domains in a row, each next to its neighbours; work front-loaded
+    adj = [(0b111 << d >> 1) & full for d in range(8)]
+    work = [9, 9, 4, 4, 2, 2, 1, 1]  # +1 each: 10 10 5 5 3 3 2 2, total 40
+    own, allowed = claim_masks("band", 8, 2, adj, work)
+    assert list(own) == [0b11, full & ~0b11]  # 20 of 40 in the first two
+    assert list(allowed) == [0b111, full & ~0b1]
+    own, allowed = claim_masks("band", 8, 2, adj)  # without work: equal shares
+    assert list(own) == [0x0F, 0xF0] and list(allowed) == [0x1F, 0xF8]
+    own, allowed = claim_masks("band", 2, 3, [0b11, 0b11], [100, 0])  # a run left empty
+    assert list(own) == [0, 0b1, 0b10] and list(allowed) == [0b11, 0b11, 0b11]
+    full63 = (1 << 63) - 1
+    own, allowed = claim_masks("band", 63, 2, [full63] * 63)
+    assert int(own[0]) | int(own[1]) == full63 and list(allowed) == [full63, full63]
+    with pytest.raises(ValueError):
+        claim_masks("nearest", 8, 2)
 
 
 def test_home_ranges_tile_the_domains():
@@ -333,12 +397,13 @@ def test_pool_statistics_and_options():
         Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
     eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
     try:
-        assert (eng.pool_split, eng.pool_claim) == ("tree", "earliest")
+        assert (eng.pool_split, eng.pool_claim) == ("tree", "band")
         with pytest.raises(InputError, match="^pool_split: must be 'work' or 'tree'"):
             eng.pool_split = "equal"
-        with pytest.raises(InputError, match="^pool_claim: must be 'home' or 'earliest'"):
+        with pytest.raises(InputError,
+                           match="^pool_claim: must be 'band' or 'earliest' or 'home'"):
             eng.pool_claim = None
-        assert (eng.pool_split, eng.pool_claim) == ("tree", "earliest")
+        assert (eng.pool_split, eng.pool_claim) == ("tree", "band")
     finally:
         eng.close()
 
