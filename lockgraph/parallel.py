@@ -842,7 +842,7 @@ class Workers:
         after the domains' rows and the step's row, a row per thread: the
         domains it claims first and those it may claim (``masks``, from
         ``pool.claim_masks``)."""
-        from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PSETTLE
+        from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PPROG, PSETTLE
 
         self.ctrl[:] = 0
         self.ctrl[JITTER] = self.jitter
@@ -853,6 +853,7 @@ class Workers:
         nd = len(dlo)  # each domain's row, all at once (a loop cost ~0.1 ms at 16)
         clock = np.where(dtour_s[:, 1] >= 0, dtour_t[:, 1], np.inf)
         pctl[:nd, :PHIGH] = 0
+        pctl[:nd, PPROG] = 0
         pctl[:nd, PCLOCK] = clock.view(np.int64)
         pctl[:nd, PINFL] = np.float64(np.inf).view(np.int64)
         pctl[:nd, POWNER] = -1
