@@ -68,10 +68,10 @@ only.  ``"earliest"``: any.  ``"home"``: its share of the domains in slot
 order first, then any.  ``Engine.pool_split = "work"`` cuts the slots into
 runs of about equal work by the last step's collisions (``work_split``).
 Measured on the 50,000-grain bed against ``"earliest"`` (README,
-Benchmarks: "Band claims" and "Own domains"): "band" 23-32 % faster in the
-minutes the two threads' cores are far apart (separate caches) and 1-5 %
-faster when they are near (the ring, N = 2e5: 1 % slower, the cost of the
-adjacency); "home" 0-16 % faster far and 1-6 % slower near.
+Benchmarks: "Band claims" and "Own domains"): "band" 19-32 % faster in the
+minutes the two threads' cores are far apart (separate caches) and 0.90-1.05
+times as fast when they are near (the ring, N = 2e5: 1 % slower, the cost of
+the adjacency); "home" 0-16 % faster far and 1-6 % slower near.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
 third its owner; on a fourth its latest event time and progress), then the
