@@ -29,7 +29,7 @@ from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, PPROG, claim_masks, init_domains,
-                   pool_state, work_split)
+                   pool_state, restore_start, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -412,6 +412,7 @@ class Engine:
                              f"need 1.5*omega*dt < 0.25 (dt < {0.25 / (1.5 * hill.omega):.6g} s)")
         self.balance = 0 if self.threads == 1 else BALANCE if balance is None else int(balance)
         self._pool_keep = {}  # schedule="pool": its per-slot arrays, kept across steps
+        self._pool_start = None  # a pool step's step-start values (``_rollback``)
         self._load(state, copy)
         self.totals = np.zeros(K.NSTAT)
         self.phase_s = np.zeros(3)  # wall seconds: search, events, whole steps (phase_seconds)
@@ -881,6 +882,7 @@ class Engine:
             began = time.perf_counter()
             self.ctr[K.LCOUNT] = log_start
             st = detected.copy()
+            self._pool_start = None  # this attempt's step-start values, when a pool step
             parts, step, tree, nbrs, evq, jour, cfg = self._bundles(img_pos, img_vel, full)
             if sequential:
                 # events on one thread (one thread in all, schedule auto or a
@@ -906,15 +908,19 @@ class Engine:
                 # 3.9 ms a step dealt, against 1.6 + 1.1 ms for the claimed
                 # first events and the one queue)
                 if self.schedule == "pool":  # and the pool's words of the domain's slots
-                    pst, locks = pool_state(self.n, nd, self.threads, self._pool_keep)
+                    pst, locks = pool_state(self.n, nd, self.threads, self._pool_keep,
+                                            len(self.tlast))
                     hops, wt, sdom = pst[:3]
+                    # a redo puts back these step-start values, not the journal's
+                    start = self._pool_keep["start"]
                     claim = self._claim_word()
                     # "band" claims by domain adjacency, worked out with the first events
                     self._pool_adj = adj = np.zeros(nd if self._pool_claim == "band" else 0,
                                                     np.int64)
                     self._pmap(init_domains, [
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s, adj) for k in range(self.threads)])
+                         dlo, dhi, dtour_t, dtour_s, adj, start) for k in range(self.threads)])
+                    self._pool_start = start
                 else:
                     self._claimed(K.init_range, nd, lambda d, k: (
                         parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d], dtour_t[d],
@@ -1231,6 +1237,9 @@ class Engine:
         K.rollback(self.pos, self.vel, self.tl, self.ncoll, self.tlast, self.anc, self.cis,
                    self.jslot, self.jvel, self.jtlast, int(self.ctr[JCOUNT]))
         self.ctr[JCOUNT] = 0
+        if self._pool_start is not None:  # a pool step: its threads may have raced
+            restore_start(self.vel, self.ncoll, self.tlast, self._pool_start)
+            self._pool_start = None
 
     def _grow_journal(self):
         cap = 2 * self.jslot.shape[0]
