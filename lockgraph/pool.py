@@ -31,7 +31,9 @@ commit that no particle it wrote or read (i, j and their candidates, the
 pairs found during the event included) carries a later time: any event that
 read or wrote what this one writes, or wrote what it read, wrote one of those
 particles.  A later time is a violation: the step is redone sequentially
-(a repair), so the result is always the sequential one bit for bit.  A pick
+(a repair, from the step-start values the pool saved: ``save_start``; not
+from the undo journal, which two threads writing one particle at once can
+leave wrong), so the result is always the sequential one bit for bit.  A pick
 whose particle's event changed before its look passed (the same pair event
 held by both particles, run from the other side) is *stale*: it is withdrawn,
 not repaired.  The
