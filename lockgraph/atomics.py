@@ -6,6 +6,9 @@ consistent) on the address of ``arr[i]``.  A thread that spins on memory another
 thread writes must read it with ``load`` — a plain load in a loop is hoisted out
 of the loop by LLVM and the thread never sees the change.
 
+``prefetch_read`` / ``prefetch_write``: cache hints (LLVM's ``llvm.prefetch``)
+for the lines an event is about to use; they change no value.
+
 Float64 maxima: for non-negative doubles the IEEE bit patterns, read as signed
 int64, order exactly like the values, so ``fetch_max`` on an int64 view of a
 float64 array is an atomic maximum of non-negative floats.
@@ -194,3 +197,42 @@ def spin_lock(word, i):
 @kernel(inline=True)
 def spin_unlock(word, i):
     store(word, i, 0)
+
+
+
+def _prefetch(rw, name, doc):
+    """A ``prefetch`` intrinsic: LLVM's ``llvm.prefetch`` (rw 0: read, 1:
+    write; locality 3: keep in every cache level) of the line holding row i of
+    a 1-D or 2-D array of any type.  A hint only: it changes no value."""
+    def prefetch(typingctx, arr, i):
+        if not (isinstance(arr, types.Array) and arr.ndim in (1, 2)):
+            raise TypeError("prefetch works on 1-D or 2-D arrays")
+
+        def codegen(context, builder, sig, args):
+            aryty = sig.args[0]
+            ary = context.make_array(aryty)(context, builder, args[0])
+            row = context.cast(builder, args[1], sig.args[1], types.intp)
+            inds = [row] + [context.get_constant(types.intp, 0)] * (aryty.ndim - 1)
+            ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+            i8p = builder.bitcast(ptr, ir.IntType(8).as_pointer())
+            i32 = ir.IntType(32)
+            fnty = ir.FunctionType(ir.VoidType(), [i8p.type, i32, i32, i32])
+            # the overload's name: ".p0" with opaque pointers (llvmlite >= 0.44),
+            # ".p0i8" with typed ones
+            opaque = getattr(i8p.type, "is_opaque", False)
+            fn = cgutils.get_or_insert_function(
+                builder.module, fnty, "llvm.prefetch.p0" if opaque else "llvm.prefetch.p0i8")
+            builder.call(fn, [i8p, ir.Constant(i32, rw), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+            return context.get_dummy_value()
+
+        return types.none(arr, i), codegen
+
+    prefetch.__name__ = name
+    prefetch.__doc__ = doc
+    return intrinsic(prefetch)
+
+
+prefetch_read = _prefetch(0, "prefetch_read",
+                          "Start fetching arr[i]'s cache line to read it (x86: prefetcht0).")
+prefetch_write = _prefetch(1, "prefetch_write",
+                           "Start fetching arr[i]'s cache line to write it (x86: prefetchw).")
