@@ -199,7 +199,6 @@ def spin_unlock(word, i):
     store(word, i, 0)
 
 
-
 def _prefetch(rw, name, doc):
     """A ``prefetch`` intrinsic: LLVM's ``llvm.prefetch`` (rw 0: read, 1:
     write; locality 3: keep in every cache level) of the line holding row i of

@@ -715,7 +715,7 @@ def prefetch_event(i, j, parts, nbrs):
     about to use: the two particles' positions and velocities, to be written,
     and their candidates' positions and velocities, which ``predict`` reads.
     The fetches then overlap instead of waiting one after another inside the
-    event (README, Benchmarks: "Prefetching an event's lines")."""
+    event (README, Benchmarks: "Where the far cost is, and prefetching")."""
     pos, vel = parts[0], parts[1]
     noff, nent = nbrs[0], nbrs[1]
     for q in range(2):
