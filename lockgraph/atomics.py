@@ -22,9 +22,13 @@ from ._jit import kernel
 
 
 def _item_pointer(context, builder, arr_t, arr, idx_t, idx):
+    """The address of arr[idx] (of row idx's first element, arr[idx, 0], for a
+    2-D array)."""
     ary = context.make_array(arr_t)(context, builder, arr)
     i = context.cast(builder, idx, idx_t, types.intp)
-    return cgutils.get_item_pointer(context, builder, arr_t, ary, [i], wraparound=False)
+    zero = context.get_constant(types.intp, 0)
+    return cgutils.get_item_pointer(context, builder, arr_t, ary, [i] + [zero] * (arr_t.ndim - 1),
+                                    wraparound=False)
 
 
 def _check(arr):
@@ -208,11 +212,7 @@ def _prefetch(rw, name, doc):
             raise TypeError("prefetch works on 1-D or 2-D arrays")
 
         def codegen(context, builder, sig, args):
-            aryty = sig.args[0]
-            ary = context.make_array(aryty)(context, builder, args[0])
-            row = context.cast(builder, args[1], sig.args[1], types.intp)
-            inds = [row] + [context.get_constant(types.intp, 0)] * (aryty.ndim - 1)
-            ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+            ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
             i8p = builder.bitcast(ptr, ir.IntType(8).as_pointer())
             i32 = ir.IntType(32)
             fnty = ir.FunctionType(ir.VoidType(), [i8p.type, i32, i32, i32])
