@@ -113,6 +113,7 @@ def cmd_run(args):
         "max_overlap": stats["max_overlap"],
         "violations": stats["violations"],
         "repairs": stats["repairs"],
+        "repairs_on_threads": stats["repairs_on_threads"],
         "time": final.time,
         "state_sha256": final.sha256(),
         "peak_rss_mb": _peak_rss_mb(),

@@ -28,8 +28,8 @@ from . import kernels as K
 from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
-from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, PPROG, claim_masks, init_domains,
-                   pool_state, restore_start, work_split)
+from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, PPROG, REDO_WINDOW, claim_masks,
+                   init_domains, pool_state, restore_start, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -325,6 +325,12 @@ class Engine:
     # (``pool.home_range``) and, only when none of those can run, the
     # earliest of all (README, Benchmarks: "Own domains").
     pool_claim = _Option("band", "earliest", "home")
+    # How a pool step is redone after a violation: "threads" (default since
+    # 2026-12-05) first on the threads again, interior events held within
+    # ``pool.REDO_WINDOW`` events of the other domains (the default window's
+    # run-ahead is where the bed's violations came from), and on one thread
+    # only if that attempt finds a violation too; "one" on one thread at once.
+    pool_redo = _Option("threads", "one")
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
@@ -382,19 +388,22 @@ class Engine:
         # schedule "pool": domains shared by the threads (an attribute, like merge_far)
         self.pool_domains = 4 * self.threads
         self.pool_split = "tree"
+        self.pool_redo = "threads"
         self.pool_claim = "band"
         # the pool's last step: each domain's events (``claim_masks``'s work),
         # and this step's domain adjacency (filled by ``init_domains``)
         self._pool_work = None
         self._pool_adj = np.zeros(0, np.int64)
         self._pool_cuts = None  # (dlo, dhi): the last pool step's work_split
-        # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``)
+        # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``;
+        # of the attempt that completed the step on the threads)
         self.pool_checked_steps = 0
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
         self.last_events = 0.0
         self.repairs = 0
+        self.repairs_on_threads = 0  # of those, redone on the threads (``pool_redo``)
         self._regions = None  # (last threaded step's LockRegions, interior fraction)
         self._lock_stats = None
         if trace_locks is not None and self.threads != 1:
@@ -875,6 +884,7 @@ class Engine:
         sequential = on_one
         spent = 0.0  # in the events (first events on), over every attempt
         detected = np.zeros(K.NSTAT)  # the violations of attempts that were repaired
+        redo_window = None  # a pool redo on the threads: its interior window (events)
         while True:
             began = time.perf_counter()
             self._setup(img_pos, img_vel, half)
@@ -931,7 +941,8 @@ class Engine:
                     status = self._events_sequential(st, img_pos, img_vel, full, half)
                 elif self.schedule == "pool":
                     status = self._events_pool(st, img_pos, img_vel, full,
-                                               (dlo, dhi, dtour_t, dtour_s), pst, locks)
+                                               (dlo, dhi, dtour_t, dtour_s), pst, locks,
+                                               redo_window)
                 else:
                     status = self._events_parallel(st, img_pos, img_vel, half, full,
                                                    (dlo, dhi, dtour_t, dtour_s))
@@ -970,12 +981,21 @@ class Engine:
                 continue  # redo the step with a larger pool: same result
             if status == K.VIOLATION:
                 self.repairs += 1
-                sequential = True
                 # the repair's result is the sequential one, but what was
                 # detected is counted: the statistics say why the step was redone
                 for k in (K.S_VIOL, K.S_REACHOUT):
                     detected[k] = st[k]
-                continue  # redo the step sequentially: the sequential result
+                if (self.schedule == "pool" and self.pool_redo == "threads"
+                        and redo_window is None
+                        and self.workers.window_events > REDO_WINDOW):
+                    # on the threads again, interior events kept near the others'
+                    # clocks: without violations any pool attempt gives the
+                    # sequential result, and a violation here is caught like any
+                    redo_window = REDO_WINDOW
+                    self.repairs_on_threads += 1
+                else:
+                    sequential = True  # redo the step sequentially
+                continue
             if status == K.COLLAPSE:
                 raise InelasticCollapseError(
                     f"inelastic collapse at t = {self.time:.9g} s: particle {bad_id} collided "
@@ -1139,10 +1159,12 @@ class Engine:
         k = max(1, min(int(self.pool_domains), MAX_DOMAINS, self.n))
         return 1 << (k.bit_length() - 1)
 
-    def _events_pool(self, st, img_pos, img_vel, full, queues, pst, locks):
+    def _events_pool(self, st, img_pos, img_vel, full, queues, pst, locks, window_events=None):
         """The step's events under ``schedule="pool"`` (``lockgraph/pool.py``)
         on the threads until done; ``pst``, ``locks``: ``pool.pool_state``,
-        filled with the first events (``pool.init_domain``)."""
+        filled with the first events (``pool.init_domain``); ``window_events``:
+        the interior window in a domain's mean times between events (None:
+        ``Workers.window_events``)."""
         dlo, dhi, dtour_t, dtour_s = queues
         nd = len(dlo)
         # and the step's row (PCHECKED), and the threads' claim masks
@@ -1152,14 +1174,18 @@ class Engine:
             else None
         masks = claim_masks(self._pool_claim, nd, self.threads, self._pool_adj, work)
         per_domain = max(self.last_events / nd, 1.0)
-        window = self.workers.window_events * self.dt / per_domain
-        try:
-            return self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
-                                    self.workers.run_pool(bundles, stt, locks, pst, queues,
-                                                          pctl, window, masks))
-        finally:
+        if window_events is None:
+            window_events = self.workers.window_events
+        window = window_events * self.dt / per_domain
+        status = self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
+                                  self.workers.run_pool(bundles, stt, locks, pst, queues,
+                                                        pctl, window, masks))
+        if status == K.OK:
+            # counted once a step, and the band cut of the next step (and of a
+            # redo) from the events of a whole step, not of a stopped attempt
             self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
             self._pool_work = pctl[:nd, PPROG].copy()
+        return status
 
     @staticmethod
     def _add_rows(st, stt):

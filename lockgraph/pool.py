@@ -30,10 +30,12 @@ or is *late* (earlier than an event its domain already ran), checks at its
 commit that no particle it wrote or read (i, j and their candidates, the
 pairs found during the event included) carries a later time: any event that
 read or wrote what this one writes, or wrote what it read, wrote one of those
-particles.  A later time is a violation: the step is redone sequentially
-(a repair, from the step-start values the pool saved: ``save_start``; not
-from the undo journal, which two threads writing one particle at once can
-leave wrong), so the result is always the sequential one bit for bit.  A pick
+particles.  A later time is a violation: the step is redone (a repair, from
+the step-start values the pool saved: ``save_start``; not from the undo
+journal, which two threads writing one particle at once can leave wrong), on
+the threads with the narrow interior window ``REDO_WINDOW`` and, if that
+attempt finds a violation too, on one thread (``Engine.pool_redo``), so the
+result is always the sequential one bit for bit.  A pick
 whose particle's event changed before its look passed (the same pair event
 held by both particles, run from the other side) is *stale*: it is withdrawn,
 not repaired.  The
@@ -95,6 +97,13 @@ from .parallel import (ABORT, JITTER, NOWAIT, _fail, _pause, _progress, cache_al
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
+# the interior window (in a domain's mean times between events) of a step redone
+# on the threads after a violation (``Engine.pool_redo``).  Measured on the bed,
+# 16 domains: the default window of 8 events repairs the sixth step of every
+# run (an interior event run ahead of an earlier one three candidate hops away);
+# windows of 1 and 2 events had no repair in 50 steps and ran at 1.64 and 1.67x
+# against 1.74x near (README, Benchmarks: "What the far cost is not")
+REDO_WINDOW = 2.0
 # per-domain row of dctl (four cache lines): its lock and its queue's version
 # (bumped under the lock at every change of the queue); its clock and the time of
 # its event in flight (INF when none), read together; its owner (read by every

@@ -253,6 +253,8 @@ class Simulation:
             "blocked_picks": int(t[K.S_BLOCKED]),
             "violations": int(t[K.S_VIOL] + t[K.S_REACHOUT]),
             "repairs": self._engine.repairs,
+            # of those, pool steps redone on the threads (``Engine.pool_redo``)
+            "repairs_on_threads": self._engine.repairs_on_threads,
             "wait_s": float(t[K.S_WAIT]) / cycles_per_second() if t[K.S_WAIT] else 0.0,
             "locks": self._engine.lock_stats,
             "schedule": self.schedule,

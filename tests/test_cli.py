@@ -124,8 +124,10 @@ def test_threads_json_reports_parallel_statistics(capsys):
                    "--param", "dt=60", "--threads", "2", "--lock", "graph", "--scale", "2",
                    "--policy", "exact")
     assert two["state_sha256"] == one["state_sha256"]
-    for k in ("events", "mean_concurrency", "blocked_picks", "violations", "repairs", "wait_s"):
+    for k in ("events", "mean_concurrency", "blocked_picks", "violations", "repairs",
+              "repairs_on_threads", "wait_s"):
         assert k in two
+    assert two["repairs_on_threads"] == 0  # only pool steps are redone on the threads
     assert two["threads"] == 2 and two["lock"] == "graph" and two["scale"] == 2.0
     assert two["stats"]["locks"]["regions"] >= 1
     assert two["schedule"] == "parallel" and two["threaded_event_steps"] == 6

@@ -22,8 +22,8 @@ from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
 from lockgraph.neighbors import JCOUNT
-from lockgraph.pool import (claim_masks, clear_words, domain_adjacency, domain_of, home_range,
-                            pool_state, work_split)
+from lockgraph.pool import (REDO_WINDOW, claim_masks, clear_words, domain_adjacency, domain_of,
+                            home_range, pool_state, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -232,6 +232,68 @@ def test_a_redo_puts_back_the_step_start_not_the_journal(sequential):
     assert eng.repairs > 0 and len(spoiled) == eng.repairs and min(spoiled) > 0
 
 
+def violating_first_attempts(eng, steps):
+    """Make the first pool attempt of each step in ``steps`` (engine step
+    counts) report a violation after all its events ran; returns the list of
+    (step, interior window, status returned) of every pool attempt, filled as
+    they run (a real violation is returned as it is)."""
+    real = eng._events_pool
+    attempts = []
+
+    def attempt(*args):
+        status = real(*args)
+        window = args[-1]
+        if status == K.OK and eng.steps_done in steps and window is None:
+            status = K.VIOLATION
+        attempts.append((eng.steps_done, window, status))
+        return status
+    eng._events_pool = attempt
+    return attempts
+
+
+@pytest.mark.parametrize("name", ["ring_moonlet", "dish_marble"])
+def test_a_violation_is_redone_on_the_threads_first(sequential, name):
+    """A pool step that reports a violation is rolled back and redone on the
+    threads with the narrow interior window (``pool.REDO_WINDOW``), and on
+    one thread only if that attempt reports one too; the run keeps the
+    sequential state and collision sequences bit for bit, and counts every
+    redo.  (The small dish's own checks find real violations too, also with
+    the narrow window, so the counts follow the attempts, not the forcing.)"""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = pool_engine(sc, 4)
+    forced = {1, 3}
+    attempts = violating_first_attempts(eng, forced)
+    steps_match(eng, STEPS[name], want_hash, want_seq)
+    failed = [(k, w) for k, w, status in attempts if status == K.VIOLATION]
+    redone = [(k, w) for k, w, status in attempts if w is not None]
+    assert all(w in (None, REDO_WINDOW) for k, w, status in attempts)
+    # every violated first attempt, and only those, is followed by one redo on the threads
+    assert redone == [(k, REDO_WINDOW) for k, w in failed if w is None]
+    assert {k for k, w in redone} >= forced
+    for k, w in redone:
+        mine = [a for a in attempts if a[0] == k]
+        assert mine[-1][1] == REDO_WINDOW and all(a[1] is None for a in mine[:-1])
+    assert eng.repairs_on_threads == len(redone)
+    assert eng.repairs == len(failed)  # the redo on one thread after a failed one: no attempt
+
+
+@pytest.mark.parametrize("redo,window_events", [("one", 8.0), ("threads", REDO_WINDOW)])
+def test_a_redo_goes_to_one_thread_when_asked_or_no_narrower(sequential, redo, window_events):
+    """``pool_redo = "one"``, or an interior window already no wider than the
+    redo's: a violated step is redone on one thread at once (no second pool
+    attempt), with the sequential result."""
+    sc, want_hash, want_seq = sequential("dish_marble", "late")
+    eng = pool_engine(sc, 4, window_events=window_events)
+    eng.pool_redo = redo
+    attempts = violating_first_attempts(eng, {2})
+    steps_match(eng, STEPS["dish_marble"], want_hash, want_seq)
+    # (a pool overflow redoes an attempt as it was: a step may have more than one)
+    assert {k for k, w, status in attempts} == set(range(STEPS["dish_marble"]))
+    assert all(w is None for k, w, status in attempts)
+    assert eng.repairs_on_threads == 0
+    assert eng.repairs == sum(status == K.VIOLATION for k, w, status in attempts) >= 1
+
+
 def facing_pairs(pairs=48, seed=1):
     """Pairs of spheres meeting head on across the plane x = 0, each at its own
     time, far from the other pairs, between still spheres that make x the widest
@@ -425,13 +487,15 @@ def test_pool_statistics_and_options():
         Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
     eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
     try:
-        assert (eng.pool_split, eng.pool_claim) == ("tree", "band")
+        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "band", "threads")
         with pytest.raises(InputError, match="^pool_split: must be 'work' or 'tree'"):
             eng.pool_split = "equal"
         with pytest.raises(InputError,
                            match="^pool_claim: must be 'band' or 'earliest' or 'home'"):
             eng.pool_claim = None
-        assert (eng.pool_split, eng.pool_claim) == ("tree", "band")
+        with pytest.raises(InputError, match="^pool_redo: must be 'threads' or 'one'"):
+            eng.pool_redo = "sequential"
+        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "band", "threads")
     finally:
         eng.close()
 
