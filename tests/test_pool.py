@@ -264,6 +264,8 @@ def test_a_violation_is_redone_on_the_threads_first(sequential, name):
     forced = {1, 3}
     attempts = violating_first_attempts(eng, forced)
     steps_match(eng, STEPS[name], want_hash, want_seq)
+    # an attempt that overflows the pair pool is made again as it was: not counted here
+    attempts = [a for a in attempts if a[2] != K.POOL_OVERFLOW]
     failed = [(k, w) for k, w, status in attempts if status == K.VIOLATION]
     redone = [(k, w) for k, w, status in attempts if w is not None]
     assert all(w in (None, REDO_WINDOW) for k, w, status in attempts)
