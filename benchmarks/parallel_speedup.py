@@ -424,6 +424,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 "collisions_per_step": float(d[K.S_PAIR] + d[K.S_WALL]) / (steps * repeats),
                 "mean_concurrency": float(d[K.S_CONC] / d[K.S_ECYC]) if d[K.S_ECYC] else 1.0,
                 "violations": int(d[K.S_VIOL] + d[K.S_REACHOUT]), "repairs": int(eng.repairs),
+                # of those, pool steps redone on the threads (``Engine.pool_redo``)
+                "repairs_on_threads": int(eng.repairs_on_threads),
                 "identical": eng.state().sha256() == ref,
                 # schedule auto: the timed steps whose events ran on one thread
                 "events_on_one_thread": _on_one(eng) - base_on_one[label],
