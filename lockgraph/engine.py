@@ -28,7 +28,7 @@ from . import kernels as K
 from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
-from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PHIGH, PPROG, REDO_WINDOW, claim_masks,
+from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    init_domains, pool_state, restore_start, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
@@ -317,7 +317,8 @@ class Engine:
     pool_split = _Option("work", "tree")
     # Which free domain a pool thread claims (``pool.claim_masks``): "band"
     # (default since 2026-12-05) the earliest of its own run of domains (cut
-    # at equal shares of the last step's events) and, only when none of
+    # at equal shares of the cycles the last step spent inside its domains'
+    # events) and, only when none of
     # those can run, of the domains next to that run, never others: the
     # particles inside a run stay with one thread (README, Benchmarks: "Band
     # claims"); "earliest" the one with the earliest clock; "home" the
@@ -390,7 +391,8 @@ class Engine:
         self.pool_split = "tree"
         self.pool_redo = "threads"
         self.pool_claim = "band"
-        # the pool's last step: each domain's events (``claim_masks``'s work),
+        # the pool's last step: each domain's cycles inside its events
+        # (``claim_masks``'s work),
         # and this step's domain adjacency (filled by ``init_domains``)
         self._pool_work = None
         self._pool_adj = np.zeros(0, np.int64)
@@ -1184,7 +1186,11 @@ class Engine:
             # counted once a step, and the band cut of the next step (and of a
             # redo) from the events of a whole step, not of a stopped attempt
             self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
-            self._pool_work = pctl[:nd, PPROG].copy()
+            # cycles, not events: an event's cost differs from domain to domain
+            # (1,500-3,700 cycles on the bed), and a cut at equal events left one
+            # thread more to take from the other's run (README, Benchmarks:
+            # "A band cut by cycles")
+            self._pool_work = pctl[:nd, PCYC].copy()
         return status
 
     @staticmethod

@@ -64,8 +64,8 @@ checks).
 a free thread claims the free domain with the earliest clock among those
 its two masks let it (``claim_masks``, by ``Engine.pool_claim``): the
 domains it claims first and those it may claim at all.  ``"band"`` (the
-default): its own run of domains (cut at equal shares of the last step's
-events) first, then only the domains next to that run
+default): its own run of domains (cut at equal shares of the cycles the
+last step spent inside each domain's events) first, then only the domains next to that run
 (``domain_adjacency``, worked out with the first events), so that the
 particles inside a run, away from its edge, are written by one thread
 only.  ``"earliest"``: any.  ``"home"``: its share of the domains in slot
@@ -108,10 +108,11 @@ REDO_WINDOW = 2.0
 # (bumped under the lock at every change of the queue); its clock and the time of
 # its event in flight (INF when none), read together; its owner (read by every
 # claim, written only by claims and releases); the latest event time it ran, the
-# settling flag and the progress count, written by the owner at every commit and
+# settling flag, the progress count and the cycles spent inside its events (the
+# next step's band cut: ``claim_masks``), written by the owner at every commit and
 # kept off the owner's line, which the other threads' claims read (measured on the
 # bed, 100 steps: 1-2 % faster than with the progress beside the owner)
-PLOCK, PVER, PCLOCK, PINFL, POWNER, PHIGH, PSETTLE, PPROG = 0, 1, 8, 9, 16, 24, 25, 26
+PLOCK, PVER, PCLOCK, PINFL, POWNER, PHIGH, PSETTLE, PPROG, PCYC = 0, 1, 8, 9, 16, 24, 25, 26, 27
 NPCTL = 32
 # one row more after the domains' rows: nonzero once a pair found mid-step broke
 # the masks (counted by the engine: ``Engine.pool_checked_steps``)
@@ -575,7 +576,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         else:
             status, jw = process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st,
                                        locks)
-        st[S_CONC] += cycles() - c0
+        spent = cycles() - c0
+        st[S_CONC] += spent
+        dctl[d * NPCTL + PCYC] += spent  # d is this thread's: a plain add
         if status == OK and st[S_REACHOUT] > r0:
             # a pair found by this event broke the masks (``expose_pair``): this
             # event commits once every event that began before that could see
@@ -682,8 +685,8 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     * ``"home"``: its share of the domains in slot order (``home_range``)
       first, then any.
     * ``"band"``: its run of the domains in slot order, cut at equal shares
-      of ``work`` (nd,) (each domain's events in the last step; equal
-      without), and then only the domains next to that run: those holding a
+      of ``work`` (nd,) (the engine passes each domain's cycles inside its
+      events in the last step, ``PCYC``; equal shares without), and then only the domains next to that run: those holding a
       step-start candidate of one of its slots (``adj`` (nd,): each domain's
       ``domain_adjacency``).  A thread whose run is empty may claim any.
       The particles inside a run away from its edge are then written by one

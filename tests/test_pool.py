@@ -502,6 +502,26 @@ def test_pool_statistics_and_options():
         eng.close()
 
 
+def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
+    """The next step's band cut (``Engine._pool_work``, ``claim_masks``'s
+    work) is each domain's cycles inside its events: together exactly the
+    step's cycles inside the events (``S_CONC``, the same counts), and some
+    in more than one domain."""
+    sc = sequential("dish_marble", "late")[0]
+    eng = pool_engine(sc, 4, 2)
+    try:
+        for _ in range(STEPS["dish_marble"]):
+            repairs = eng.repairs
+            eng.step()
+            work = eng._pool_work
+            assert work is not None and len(work) == 4
+            if eng.repairs == repairs:  # one attempt: its counts alone
+                assert work.sum() == eng.step_stats[K.S_CONC] > 0
+            assert (work > 0).sum() >= 2  # events in more than one domain
+    finally:
+        eng.close()
+
+
 def test_pool_arrays_kept_across_steps_carry_nothing_over():
     """``pool_state`` keeps its per-slot arrays (domains, masks, event times,
     marks) in the engine from one step to the next, and each domain's slots
