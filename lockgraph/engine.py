@@ -318,13 +318,12 @@ class Engine:
     # Which free domain a pool thread claims (``pool.claim_masks``): "band"
     # (default since 2026-12-05) the earliest of its own run of domains (cut
     # at equal shares of the cycles the last step spent inside its domains'
-    # events) and, only when none of
-    # those can run, of the domains next to that run, never others: the
-    # particles inside a run stay with one thread (README, Benchmarks: "Band
-    # claims"); "earliest" the one with the earliest clock; "home" the
-    # earliest of its own share of the domains in slot order
-    # (``pool.home_range``) and, only when none of those can run, the
-    # earliest of all (README, Benchmarks: "Own domains").
+    # events) and, only when none of those can run, of the domains next to
+    # that run, never others: the particles inside a run stay with one
+    # thread (README, Benchmarks: "Band claims"); "earliest" the one with
+    # the earliest clock; "home" the earliest of its own share of the
+    # domains in slot order (``pool.home_range``) and, only when none of
+    # those can run, the earliest of all (README, Benchmarks: "Own domains").
     pool_claim = _Option("band", "earliest", "home")
     # How a pool step is redone after a violation: "threads" (default since
     # 2026-12-05) first on the threads again, interior events held within
@@ -392,8 +391,8 @@ class Engine:
         self.pool_redo = "threads"
         self.pool_claim = "band"
         # the pool's last step: each domain's cycles inside its events
-        # (``claim_masks``'s work),
-        # and this step's domain adjacency (filled by ``init_domains``)
+        # (``claim_masks``'s work), and this step's domain adjacency (filled
+        # by ``init_domains``)
         self._pool_work = None
         self._pool_adj = np.zeros(0, np.int64)
         self._pool_cuts = None  # (dlo, dhi): the last pool step's work_split
@@ -1187,7 +1186,7 @@ class Engine:
             # redo) from the events of a whole step, not of a stopped attempt
             self.pool_checked_steps += int(pctl[nd, PCHECKED] != 0)
             # cycles, not events: an event's cost differs from domain to domain
-            # (1,500-3,700 cycles on the bed), and a cut at equal events left one
+            # (1,450-3,800 cycles on the bed), and a cut at equal events left one
             # thread more to take from the other's run (README, Benchmarks:
             # "A band cut by cycles")
             self._pool_work = pctl[:nd, PCYC].copy()

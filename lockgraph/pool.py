@@ -65,10 +65,10 @@ a free thread claims the free domain with the earliest clock among those
 its two masks let it (``claim_masks``, by ``Engine.pool_claim``): the
 domains it claims first and those it may claim at all.  ``"band"`` (the
 default): its own run of domains (cut at equal shares of the cycles the
-last step spent inside each domain's events) first, then only the domains next to that run
-(``domain_adjacency``, worked out with the first events), so that the
-particles inside a run, away from its edge, are written by one thread
-only.  ``"earliest"``: any.  ``"home"``: its share of the domains in slot
+last step spent inside each domain's events) first, then only the domains
+next to that run (``domain_adjacency``, worked out with the first events),
+so that the particles inside a run, away from its edge, are written by one
+thread only.  ``"earliest"``: any.  ``"home"``: its share of the domains in slot
 order first, then any.  ``Engine.pool_split = "work"`` cuts the slots into
 runs of about equal work by the last step's collisions (``work_split``).
 Measured on the 50,000-grain bed against ``"earliest"`` (README,
@@ -686,8 +686,9 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
       first, then any.
     * ``"band"``: its run of the domains in slot order, cut at equal shares
       of ``work`` (nd,) (the engine passes each domain's cycles inside its
-      events in the last step, ``PCYC``; equal shares without), and then only the domains next to that run: those holding a
-      step-start candidate of one of its slots (``adj`` (nd,): each domain's
+      events in the last step, ``PCYC``; equal shares without), and then
+      only the domains next to that run: those holding a step-start
+      candidate of one of its slots (``adj`` (nd,): each domain's
       ``domain_adjacency``).  A thread whose run is empty may claim any.
       The particles inside a run away from its edge are then written by one
       thread only.
