@@ -29,7 +29,7 @@ from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
-                   init_domains, pool_state, restore_start, work_split)
+                   init_domains, pool_state, restore_start, two_hop_masks, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -331,6 +331,13 @@ class Engine:
     # run-ahead is where the bed's violations came from), and on one thread
     # only if that attempt finds a violation too; "one" on one thread at once.
     pool_redo = _Option("threads", "one")
+    # When schedule "pool" works out each slot's domain masks (``kernels.hop1``,
+    # ``hop2``): "auto" (default) for every slot at the step start when the
+    # last step had more events than particles, else each at its first use;
+    # "start"; "first_use".  At first use a dense scene pays for them inside
+    # its events, where they are computed from cold lines one slot at a time
+    # (README, Benchmarks: "The pool's masks at the step start").
+    pool_masks = _Option("auto", "start", "first_use")
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
@@ -390,6 +397,7 @@ class Engine:
         self.pool_split = "tree"
         self.pool_redo = "threads"
         self.pool_claim = "band"
+        self.pool_masks = "auto"
         # the pool's last step: each domain's cycles inside its events
         # (``claim_masks``'s work), and this step's domain adjacency (filled
         # by ``init_domains``)
@@ -928,9 +936,17 @@ class Engine:
                     # "band" claims by domain adjacency, worked out with the first events
                     self._pool_adj = adj = np.zeros(nd if self._pool_claim == "band" else 0,
                                                     np.int64)
+                    masks = self._pool_masks == "start" or (
+                        self._pool_masks == "auto" and self.last_events > self.n)
                     self._pmap(init_domains, [
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s, adj, start) for k in range(self.threads)])
+                         dlo, dhi, dtour_t, dtour_s, adj, start, masks)
+                        for k in range(self.threads)])
+                    if masks:  # the two-hop masks once every one-hop mask is there
+                        claim = self._claim_word()
+                        self._pmap(two_hop_masks, [(k, self.threads, claim, hops, nbrs[0],
+                                                    nbrs[1], dlo, dhi)
+                                                   for k in range(self.threads)])
                     self._pool_start = start
                 else:
                     self._claimed(K.init_range, nd, lambda d, k: (

@@ -12,7 +12,8 @@ against 1.56x with one domain per thread.
 lock regions).  An event at key k of slots i (and partner j) writes i and j
 and reads their candidates.  ``h1[s]``: the domains of s and its candidates;
 ``h2[s]``: the union of ``h1`` over s and its candidates (two hops); each
-worked out at its first use in the step (``kernels.hop1``, ``hop2``).  The
+worked out at the step start for a dense scene, at its first use in the
+step for a sparse one (``Engine.pool_masks``; ``kernels.hop1``, ``hop2``).  The
 event waits until every other domain in ``h2[i] | h2[j]`` has no event with
 a smaller key in its queue (its *clock*, the queue's root, is later) and
 no event in flight at the same time or earlier (published apart from the
@@ -157,9 +158,11 @@ def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, to
     """Domain d at the step start: its slots' pool words (``clear_words``) and
     step-start values (``save_start``), then their first events and the
     domain's queue (``kernels.init_range``).
-    The masks are filled at first use: most slots of a sparse scene never
+    The masks are filled here (``init_domains``, ``two_hop_masks``) or at
+    first use (``Engine.pool_masks``): most slots of a sparse scene never
     need them (ring N = 2e5: 2,226 events a step; masks for every slot,
-    worked out before the events, cost 1.0-2.0 ms of a 42 ms step)."""
+    worked out before the events, cost 1.0-2.0 ms of a 42 ms step), and
+    every slot of a dense one does."""
     clear_words(d, sdom, wt, hops, lo, hi)
     save_start(parts, start, lo, hi)
     init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s)
@@ -180,25 +183,54 @@ def domain_of(dhi, s):
 
 
 @kernel
-def domain_adjacency(noff, nent, dhi, d, lo, hi):
+def domain_adjacency(noff, nent, dhi, d, lo, hi, h1):
     """The mask of the domains holding domain d (slots lo..hi-1) and the
-    step-start candidates of its slots."""
-    m = np.int64(1) << d
+    step-start candidates of its slots; unless ``h1`` is empty, each slot's
+    own such mask (its one-hop mask, ``kernels.hop1``) into ``h1``."""
+    md = np.int64(1) << d
+    m = md
+    keep = h1.shape[0] > 0
     for s in range(lo, hi):
+        ms = md
         for k in range(noff[s], noff[s + 1]):
             c = nent[k] >> 5
             if c < lo or c >= hi:  # most candidates are in d: no search
-                m |= np.int64(1) << domain_of(dhi, c)
+                ms |= np.int64(1) << domain_of(dhi, c)
+        if keep:
+            h1[s] = ms
+        m |= ms
     return m
 
 
 @kernel
+def two_hop_masks(me, nthr, claim, hops, noff, nent, dlo, dhi):
+    """Thread ``me`` of ``nthr``'s share (a domain a task) of every slot's
+    two-hop mask (``kernels.hop2``'s value) from the one-hop masks that
+    ``init_domains`` filled for every slot."""
+    h1 = hops[0]
+    h2 = hops[1]
+    nd = dlo.shape[0]
+    r = 0
+    while True:
+        d = next_task(claim, me, nthr, r)
+        r += 1
+        if d >= nd:
+            return 0
+        for s in range(dlo[d], dhi[d]):
+            m = h1[s]
+            for k in range(noff[s], noff[s + 1]):
+                m |= h1[nent[k] >> 5]
+            h2[s] = m
+
+
+@kernel
 def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, dlo, dhi, dtour_t,
-                 dtour_s, adj, start):
+                 dtour_s, adj, start, masks):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
     (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
     (``parallel.next_task``), and of the domains' ``domain_adjacency`` when
-    ``adj`` has a row for them.  One call a thread, not one a domain: each
+    ``adj`` has a row for them; with ``masks``, also every slot's one-hop
+    mask (then ``two_hop_masks``).  One call a thread, not one a domain: each
     call from Python takes the GIL, and two threads taking it in turn wait
     for each other's wake-up."""
     nd = dlo.shape[0]
@@ -210,8 +242,11 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
             return 0
         init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
                     dtour_t[d], dtour_s[d], start)
-        if adj.shape[0] > 0:
-            adj[d] = domain_adjacency(nbrs[0], nbrs[1], dhi, d, dlo[d], dhi[d])
+        if masks or adj.shape[0] > 0:
+            m = domain_adjacency(nbrs[0], nbrs[1], dhi, d, dlo[d], dhi[d],
+                                 hops[0] if masks else hops[0][:0])
+            if adj.shape[0] > 0:
+                adj[d] = m
 
 
 @kernel(inline=True)

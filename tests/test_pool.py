@@ -23,7 +23,7 @@ from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
 from lockgraph.neighbors import JCOUNT
 from lockgraph.pool import (REDO_WINDOW, claim_masks, clear_words, domain_adjacency, domain_of,
-                            home_range, pool_state, work_split)
+                            home_range, pool_state, two_hop_masks, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -65,6 +65,27 @@ def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, spli
     if claim == "band" and split == "tree":  # the last step's adjacency, by brute force
         dlo, dhi = eng._pool_ranges(len(eng._pool_adj))
         assert list(eng._pool_adj) == adjacency_by_brute_force(eng.noff, eng.nent, dlo, dhi)
+
+
+@pytest.mark.parametrize("masks", ["start", "first_use"])
+@pytest.mark.parametrize("which", ["early", "late"])
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_pool_masks_at_the_start_or_first_use_equal_sequential(sequential, name, which, masks):
+    """Every slot's masks worked out at the step start, or each at its first
+    use: the sequential result either way; at the start, the masks kept are
+    every slot's ``hop1`` and ``hop2`` of the step's candidate lists."""
+    sc, want_hash, want_seq = sequential(name, which)
+    eng = pool_engine(sc, 4)
+    eng.pool_masks = masks
+    steps_match(eng, STEPS[name], want_hash, want_seq)
+    hops = eng._pool_keep["hops"]
+    if masks == "start":
+        sdom = eng._pool_keep["sdom"]
+        fresh = np.zeros_like(hops)
+        noff, nent = eng.noff, eng.nent
+        want = [(hop1(fresh, sdom, noff, nent, s), hop2(fresh, sdom, noff, nent, s))
+                for s in range(eng.n)]
+        assert list(zip(hops[0], hops[1])) == want
 
 
 def work_split_by_brute_force(cis, nd):
@@ -132,8 +153,16 @@ def test_domain_adjacency_matches_brute_force(seed):
     nent = nent.astype(np.int32)
     for s in range(n):
         assert dlo[domain_of(dhi, s)] <= s < dhi[domain_of(dhi, s)]
-    got = [domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d]) for d in range(nd)]
+    none = np.zeros(0, np.int64)
+    got = [domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d], none) for d in range(nd)]
     assert got == adjacency_by_brute_force(noff, nent, dlo, dhi)
+    # and each slot's own mask on the way: its domain and its candidates'
+    h1 = np.zeros(n, np.int64)
+    assert [domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d], h1) for d in range(nd)] == got
+    dom = [domain_of(dhi, s) for s in range(n)]
+    assert list(h1) == [(1 << dom[s]) | sum({1 << dom[nent[k] >> 5]
+                                             for k in range(noff[s], noff[s + 1])})
+                        for s in range(n)]
 
 
 def test_claim_masks():
@@ -422,6 +451,16 @@ def test_hop_masks_match_breadth_first_search(seed):
                 got[s] = (hop1(hops, sdom, noff, nent, s), h2)
         assert [got[s] for s in range(n)] == want
         assert list(zip(hops[0], hops[1])) == want  # kept
+    # or for every slot at the step start (``Engine.pool_masks``): the one-hop
+    # masks domain by domain, then the two-hop ones, on one thread or claimed
+    for claim in (np.zeros(0, np.int64), np.zeros(1, np.int64)):
+        hops = np.zeros((4, n), np.int64)
+        for d in range(len(dlo)):
+            domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d], hops[0])
+        two_hop_masks(0, 1, claim, hops, noff, nent, dlo, dhi)
+        assert list(zip(hops[0], hops[1])) == want
+        assert [(hop1(hops, sdom, noff, nent, s), hop2(hops, sdom, noff, nent, s))
+                for s in range(n)] == want  # and what the events then read
     locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), np.zeros((4, n), np.int64))
     for _ in range(40):
         a, b = (int(x) for x in rng.integers(0, n, 2))
@@ -490,6 +529,10 @@ def test_pool_statistics_and_options():
     eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
     try:
         assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "band", "threads")
+        assert eng.pool_masks == "auto"
+        with pytest.raises(InputError,
+                           match="^pool_masks: must be 'auto' or 'start' or 'first_use'"):
+            eng.pool_masks = "never"
         with pytest.raises(InputError, match="^pool_split: must be 'work' or 'tree'"):
             eng.pool_split = "equal"
         with pytest.raises(InputError,
