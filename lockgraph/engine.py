@@ -336,7 +336,8 @@ class Engine:
     # last step had more events than particles, else each at its first use;
     # "start"; "first_use".  At first use a dense scene pays for them inside
     # its events, where they are computed from cold lines one slot at a time
-    # (README, Benchmarks: "The pool's masks at the step start").
+    # (README, Benchmarks: "The pool on one thread, and its masks at the step
+    # start").
     pool_masks = _Option("auto", "start", "first_use")
 
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
