@@ -22,6 +22,7 @@ from lockgraph.errors import InputError
 from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
 from lockgraph.neighbors import JCOUNT
+from lockgraph.parallel import TIME_EVERY
 from lockgraph.pool import (REDO_WINDOW, claim_masks, clear_words, domain_adjacency, domain_of,
                             home_range, pool_state, two_hop_masks, work_split)
 from lockgraph.restitution import Constant
@@ -548,8 +549,9 @@ def test_pool_statistics_and_options():
 def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
     """The next step's band cut (``Engine._pool_work``, ``claim_masks``'s
     work) is each domain's cycles inside its events: together exactly the
-    step's cycles inside the events (``S_CONC``, the same counts), and some
-    in more than one domain."""
+    step's cycles inside the events (``S_CONC``, the same counts: one event
+    in ``TIME_EVERY`` of each domain timed, counted that many times), and
+    some in more than one domain."""
     sc = sequential("dish_marble", "late")[0]
     eng = pool_engine(sc, 4, 2)
     try:
@@ -560,6 +562,7 @@ def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
             assert work is not None and len(work) == 4
             if eng.repairs == repairs:  # one attempt: its counts alone
                 assert work.sum() == eng.step_stats[K.S_CONC] > 0
+                assert work.sum() % TIME_EVERY == 0
             assert (work > 0).sum() >= 2  # events in more than one domain
     finally:
         eng.close()
