@@ -945,8 +945,8 @@ class Engine:
                         for k in range(self.threads)])
                     if masks:  # the two-hop masks once every one-hop mask is there
                         claim = self._claim_word()
-                        self._pmap(two_hop_masks, [(k, self.threads, claim, hops, nbrs[0],
-                                                    nbrs[1], dlo, dhi)
+                        self._pmap(two_hop_masks, [(k, self.threads, claim, hops, sdom,
+                                                    nbrs[0], nbrs[1], dlo, dhi)
                                                    for k in range(self.threads)])
                     self._pool_start = start
                 else:

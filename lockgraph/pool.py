@@ -206,12 +206,10 @@ def domain_adjacency(noff, nent, dhi, d, lo, hi, h1):
 
 
 @kernel
-def two_hop_masks(me, nthr, claim, hops, noff, nent, dlo, dhi):
+def two_hop_masks(me, nthr, claim, hops, sdom, noff, nent, dlo, dhi):
     """Thread ``me`` of ``nthr``'s share (a domain a task) of every slot's
-    two-hop mask (``kernels.hop2``'s value) from the one-hop masks that
-    ``init_domains`` filled for every slot."""
-    h1 = hops[0]
-    h2 = hops[1]
+    two-hop mask (``kernels.hop2``, from the one-hop masks that
+    ``init_domains`` filled for every slot)."""
     nd = dlo.shape[0]
     r = 0
     while True:
@@ -220,10 +218,7 @@ def two_hop_masks(me, nthr, claim, hops, noff, nent, dlo, dhi):
         if d >= nd:
             return 0
         for s in range(dlo[d], dhi[d]):
-            m = h1[s]
-            for k in range(noff[s], noff[s + 1]):
-                m |= h1[nent[k] >> 5]
-            h2[s] = m
+            hop2(hops, sdom, noff, nent, s)
 
 
 @kernel

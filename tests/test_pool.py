@@ -458,7 +458,7 @@ def test_hop_masks_match_breadth_first_search(seed):
         hops = np.zeros((4, n), np.int64)
         for d in range(len(dlo)):
             domain_adjacency(noff, nent, dhi, d, dlo[d], dhi[d], hops[0])
-        two_hop_masks(0, 1, claim, hops, noff, nent, dlo, dhi)
+        two_hop_masks(0, 1, claim, hops, sdom, noff, nent, dlo, dhi)
         assert list(zip(hops[0], hops[1])) == want
         assert [(hop1(hops, sdom, noff, nent, s), hop2(hops, sdom, noff, nent, s))
                 for s in range(n)] == want  # and what the events then read
