@@ -101,6 +101,7 @@ def cmd_run(args):
         "events": stats["events"],
         "mean_concurrency": stats["mean_concurrency"],
         "blocked_picks": stats["blocked_picks"],
+        "asked_switches": stats["asked_switches"],
         "wait_s": stats["wait_s"],
         "collisions": stats["collisions"],
         "pair_collisions": stats["pair_collisions"],

@@ -34,7 +34,7 @@ from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
-from .events import tournament_size
+from .events import BUCKET_BITS, tournament_size
 from .forces import kick_hill
 from .neighbors import JCOUNT, NCTR, build_csr
 from .restitution import CollapseGuard, VelocityGuard
@@ -908,7 +908,8 @@ class Engine:
                 # events on one thread (one thread in all, schedule auto or a
                 # repair): the first events on all threads, then one queue
                 m = self.threads * max(self.balance, 1)
-                lo = [self.n * k // m for k in range(m + 1)]
+                # cut at buckets' first slots: each task builds its buckets' leaves
+                lo = [(self.n * k // m) >> BUCKET_BITS << BUCKET_BITS for k in range(m)] + [self.n]
                 rows = cache_aligned((m, K.NSTAT))
                 self._claimed(K.first_events, m, lambda i, k: (
                     parts, nbrs, evq, cfg, rows[i], lo[i], lo[i + 1]))

@@ -82,11 +82,25 @@ def _bucket_min(evt, ids, hidden, lo, hi, b):
 @kernel
 def build_queue(tour_t, tour_s, evt, ids, hidden, lo, hi):
     """Build the tournament over slots lo..hi-1 (a domain; the whole system: 0..N)."""
+    build_leaves(tour_t, tour_s, evt, ids, hidden, lo, hi, 0, tour_t.shape[0] >> 1)
+    build_inner(tour_t, tour_s, ids)
+
+
+@kernel(inline=True)
+def build_leaves(tour_t, tour_s, evt, ids, hidden, lo, hi, b0, b1):
+    """Leaves b0..b1-1 of the tournament over slots lo..hi-1: each bucket's
+    earliest event (none past the last slot's bucket)."""
     q = tour_t.shape[0] >> 1
-    for b in range(q):
+    for b in range(b0, b1):
         t, s = _bucket_min(evt, ids, hidden, lo, hi, b)
         tour_t[q + b] = t
         tour_s[q + b] = s
+
+
+@kernel(inline=True)
+def build_inner(tour_t, tour_s, ids):
+    """The tournament's inner nodes, from its leaves."""
+    q = tour_t.shape[0] >> 1
     for k in range(q - 1, 0, -1):
         a = 2 * k
         if key_less(tour_t[a + 1], tour_s[a + 1], tour_t[a], tour_s[a], ids):

@@ -251,6 +251,9 @@ class Simulation:
             # time-averaged number of threads busy with events while they ran
             "mean_concurrency": (float(t[K.S_CONC] / t[K.S_ECYC]) if t[K.S_ECYC] else 1.0),
             "blocked_picks": int(t[K.S_BLOCKED]),
+            # pool: domains a thread switched to because another thread asked
+            # (a pick of that one held back by it: ``pool._ask``)
+            "asked_switches": int(t[K.S_ASKED]),
             "violations": int(t[K.S_VIOL] + t[K.S_REACHOUT]),
             "repairs": self._engine.repairs,
             # of those, pool steps redone on the threads (``Engine.pool_redo``)

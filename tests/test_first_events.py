@@ -10,7 +10,7 @@ import pytest
 from lockgraph import kernels as K
 from lockgraph import scenarios
 from lockgraph.engine import Engine
-from lockgraph.events import build_queue, tournament_size
+from lockgraph.events import BUCKET_BITS, build_queue, tournament_size
 
 SCENES = {
     "ring": dict(n=800, params={"dispersion": 0.003, "dt": 60.0}),
@@ -51,3 +51,33 @@ def test_domain_first_events_equal_the_sequential_ones(name, cuts):
     for a, b in zip(want, got):
         assert np.array_equal(a, b)  # bit for bit (times compared exactly)
     assert rows[:, K.S_MAXOV].max() == st[K.S_MAXOV]
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("tasks", [1, 3, 7])
+def test_first_events_by_buckets_build_the_one_queue(name, tasks):
+    """The engine's one queue from first events in slices cut at buckets'
+    first slots (each slice builds its buckets' leaves, ``init_queue`` the
+    rest): node for node the tournament ``build_queue`` makes from scratch,
+    whatever the slices, after every slot's leaf was set to garbage."""
+    cfg = SCENES[name]
+    sc = scenarios.load(name, n=cfg["n"], params=cfg["params"])
+    eng = Engine(sc.state, sc.physics, sc.dt, leaf_size=4)
+    for _ in range(2):
+        eng.step()
+    img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
+    eng._setup(img_pos, img_vel, half)
+    parts, step, tree, nbrs, evq, jour, cfg_ = eng._bundles(img_pos, img_vel, full)
+    tour_t, tour_s = evq[3], evq[4]
+    tour_t[:] = -7.0
+    tour_s[:] = 12345
+    n = eng.n
+    lo = [(n * k // tasks) >> BUCKET_BITS << BUCKET_BITS for k in range(tasks)] + [n]
+    st = np.zeros(K.NSTAT)
+    for k in reversed(range(tasks)):  # any order
+        K.first_events(parts, nbrs, evq, cfg_, st, lo[k], lo[k + 1])
+    K.init_queue(parts, evq)
+    tt, ts = np.full_like(tour_t, np.inf), np.full_like(tour_s, -1)
+    build_queue(tt, ts, eng.evt, eng.ids, eng.hidden, 0, n)
+    assert np.array_equal(tour_t[1:], tt[1:]) and np.array_equal(tour_s[1:], ts[1:])
+    assert tour_s[1] >= 0  # some event to run
