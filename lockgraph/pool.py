@@ -87,7 +87,7 @@ edge between two runs gets there only when its own earliest clock says so,
 while the other thread's picks at that edge fail.  Measured on the bed
 (paired, 16-20 steps, five runs): 2-5 % faster steps, blocked picks 0.62
 an event against 0.72-0.77.  Taking the blocker at once instead (the
-asker claims it) was 6-9 % slower: the domain's particles move to the
+asker claims it) was 6-7 % slower: the domain's particles move to the
 other core.
 
 Shared words: ``dctl`` per domain (its lock; on a second line its clock; on a
