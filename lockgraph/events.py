@@ -87,6 +87,12 @@ def build_queue(tour_t, tour_s, evt, ids, hidden, lo, hi):
 
 
 @kernel(inline=True)
+def buckets_of(n):
+    """The buckets that slots 0..n-1 fill (the last one possibly in part)."""
+    return (n + BUCKET - 1) >> BUCKET_BITS
+
+
+@kernel(inline=True)
 def build_leaves(tour_t, tour_s, evt, ids, hidden, lo, hi, b0, b1):
     """Leaves b0..b1-1 of the tournament over slots lo..hi-1: each bucket's
     earliest event (none past the last slot's bucket)."""

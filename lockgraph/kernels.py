@@ -51,7 +51,7 @@ from ._jit import kernel
 
 from .forces import hill_coefficients, hill_kicked
 from .events import (BUCKET_BITS, CYLINDER, FLOOR, NONE, build_inner, build_leaves,
-                     build_queue, update_queue, update_queue_pair)
+                     build_queue, buckets_of, update_queue, update_queue_pair)
 from .atomics import (cycles, fetch_add, fetch_max, float_bits, load, prefetch_read,
                       prefetch_write, store)
 from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
@@ -654,9 +654,8 @@ def first_events(parts, nbrs, evq, cfg, st, lo, hi):
     build took 1.2 ms of a 31 ms two-thread step."""
     _first_events(parts, nbrs, evq, cfg, st, lo, hi)
     evt, evp, evc, tour_t, tour_s, hidden = evq
-    b1 = (hi + (1 << BUCKET_BITS) - 1) >> BUCKET_BITS
     build_leaves(tour_t, tour_s, evt, parts[7], hidden, 0, parts[0].shape[0], lo >> BUCKET_BITS,
-                 b1)
+                 buckets_of(hi))
 
 
 @kernel
@@ -665,8 +664,8 @@ def init_queue(parts, evq):
     every slot's bucket: the empty leaves past them and the inner nodes."""
     evt, evp, evc, tour_t, tour_s, hidden = evq
     n = parts[0].shape[0]
-    build_leaves(tour_t, tour_s, evt, parts[7], hidden, 0, n,
-                 (n + (1 << BUCKET_BITS) - 1) >> BUCKET_BITS, tour_t.shape[0] >> 1)
+    build_leaves(tour_t, tour_s, evt, parts[7], hidden, 0, n, buckets_of(n),
+                 tour_t.shape[0] >> 1)
     build_inner(tour_t, tour_s, parts[7])
 
 

@@ -20,17 +20,24 @@ SCENES = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(SCENES))
-@pytest.mark.parametrize("cuts", [(0.5,), (0.13, 0.61), (0.25, 0.5, 0.75)])
-def test_domain_first_events_equal_the_sequential_ones(name, cuts):
+def set_up(name, steps):
+    """An engine on scene ``name`` after ``steps`` steps, with the next step's
+    candidate lists found: (engine, parts, nbrs, evq, cfg) for the kernels."""
     cfg = SCENES[name]
     sc = scenarios.load(name, n=cfg["n"], params=cfg["params"])
     eng = Engine(sc.state, sc.physics, sc.dt, leaf_size=4)
-    for _ in range(3):
+    for _ in range(steps):
         eng.step()
     img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
     eng._setup(img_pos, img_vel, half)
     parts, step, tree, nbrs, evq, jour, cfg_ = eng._bundles(img_pos, img_vel, full)
+    return eng, parts, nbrs, evq, cfg_
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+@pytest.mark.parametrize("cuts", [(0.5,), (0.13, 0.61), (0.25, 0.5, 0.75)])
+def test_domain_first_events_equal_the_sequential_ones(name, cuts):
+    eng, parts, nbrs, evq, cfg_ = set_up(name, 3)
     st = np.zeros(K.NSTAT)
     K.first_events(parts, nbrs, evq, cfg_, st, 0, eng.n)
     K.init_queue(parts, evq)
@@ -60,14 +67,7 @@ def test_first_events_by_buckets_build_the_one_queue(name, tasks):
     first slots (each slice builds its buckets' leaves, ``init_queue`` the
     rest): node for node the tournament ``build_queue`` makes from scratch,
     whatever the slices, after every slot's leaf was set to garbage."""
-    cfg = SCENES[name]
-    sc = scenarios.load(name, n=cfg["n"], params=cfg["params"])
-    eng = Engine(sc.state, sc.physics, sc.dt, leaf_size=4)
-    for _ in range(2):
-        eng.step()
-    img_pos, img_vel, half, full = sc.physics.domain.images(eng.time)
-    eng._setup(img_pos, img_vel, half)
-    parts, step, tree, nbrs, evq, jour, cfg_ = eng._bundles(img_pos, img_vel, full)
+    eng, parts, nbrs, evq, cfg_ = set_up(name, 2)
     tour_t, tour_s = evq[3], evq[4]
     tour_t[:] = -7.0
     tour_s[:] = 12345
