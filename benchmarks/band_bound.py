@@ -176,7 +176,7 @@ def pool(trace, cps, cut, syncs, domains, threads, runs=tuple(POOL_RUNS)):
     rows = {}
     for ev, slot, noff, nent, (region, loff, ladj), pos in trace:
         si, sj, cost = in_slots(ev, slot, cps)
-        made = creators(si, sj, ev["kind"])
+        made = creators(si, sj, ev["kind"]) if "seen" in runs else None
         for k in domains:
             dom = cut_domains(slot.shape[0], si, sj, cost, cut, k, pos)
             waits = {"particles": event_waits(si, sj, dom,
