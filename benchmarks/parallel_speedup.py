@@ -139,20 +139,22 @@ def parse_locks(text):
     K; pool:K:home: with domains cut by work and claimed by their own thread
     first, ``Engine.pool_split = "work"``, ``pool_claim = "home"``;
     pool:K:earliest: any thread claims any domain, ``pool_claim = "earliest"``
-    (the default until 2026-12-05; pool:K itself claims by ``"band"``: each
-    thread its own run of domains and those next to it)."""
+    (the default until 2026-12-05); pool:K:band: each thread claims its own
+    run of domains and those next to it (the default from 2026-12-05 to
+    2026-12-06); pool:K:runs, the default and pool:K itself: each thread
+    holds its own run for the step and never takes another's)."""
     out = []
     for item in text.split(","):
         kind, _, rest = item.partition(":")
         scale, _, flag = rest.partition(":")
-        if kind == "pool" and flag in ("", "home", "earliest"):
+        if kind == "pool" and flag in ("", "home", "earliest", "band", "runs"):
             out.append(("pool", float(scale) if scale else 8.0, True,
                         "pool:" + flag if flag else "pool"))
             continue
         if kind not in ("graph", "grid", "grid3d") or flag not in ("", "unmerged", "auto"):
             raise SystemExit(f"--locks: unknown lock {item!r} (graph:SCALE, "
                              "graph:SCALE:unmerged, graph:SCALE:auto, grid, grid3d, pool:K, "
-                             "pool:K:home, pool:K:earliest)")
+                             "pool:K:home, pool:K:earliest, pool:K:band, pool:K:runs)")
         out.append((kind, float(scale) if scale else 4.0, flag != "unmerged",
                     "auto" if flag == "auto" else "parallel"))
     return out
@@ -300,8 +302,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
             if flag == "home":
                 engines[label].pool_split = "work"
                 engines[label].pool_claim = "home"
-            elif flag == "earliest":
-                engines[label].pool_claim = "earliest"
+            elif flag in ("earliest", "band", "runs"):
+                engines[label].pool_claim = flag
             continue
         label = f"2 threads {kind}" + (f" {scale:g}" if kind == "graph" else "") + (
             "" if merge else " unmerged") + (" auto" if schedule == "auto" else "")

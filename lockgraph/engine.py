@@ -315,8 +315,11 @@ class Engine:
     # domain count, as "tree").  On the 50,000-grain bed the first half of
     # the tree's slots held 75-84 % of a step's collisions.
     pool_split = _Option("work", "tree")
-    # Which free domain a pool thread claims (``pool.claim_masks``): "band"
-    # (default since 2026-12-05) the earliest of its own run of domains (cut
+    # Which domain a pool thread runs (``pool.claim_masks``): "runs" (default
+    # since 2026-12-06) the earliest of its own run of domains (cut as for
+    # "band"), never another's, with no claims at all (README, Benchmarks:
+    # "Own runs, no claims"); "band" (the default from 2026-12-05) the
+    # earliest free one of its own run of domains (cut
     # at equal shares of the cycles the last step spent inside its domains'
     # events) and, only when none of those can run, of the domains next to
     # that run, never others: the particles inside a run stay with one
@@ -324,7 +327,7 @@ class Engine:
     # the earliest clock; "home" the earliest of its own share of the
     # domains in slot order (``pool.home_range``) and, only when none of
     # those can run, the earliest of all (README, Benchmarks: "Own domains").
-    pool_claim = _Option("band", "earliest", "home")
+    pool_claim = _Option("runs", "band", "earliest", "home")
     # How a pool step is redone after a violation: "threads" (default since
     # 2026-12-05) first on the threads again, interior events held within
     # ``pool.REDO_WINDOW`` events of the other domains (the default window's
@@ -397,7 +400,7 @@ class Engine:
         self.pool_domains = 4 * self.threads
         self.pool_split = "tree"
         self.pool_redo = "threads"
-        self.pool_claim = "band"
+        self.pool_claim = "runs"
         self.pool_masks = "auto"
         # the pool's last step: each domain's cycles inside its events
         # (``claim_masks``'s work), and this step's domain adjacency (filled

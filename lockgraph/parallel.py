@@ -852,8 +852,9 @@ class Workers:
         journal resumes the step); its clocks and owners are set here, and
         after the domains' rows and the step's row, a row per thread: the
         domains it claims first and those it may claim (``masks``, from
-        ``pool.claim_masks``)."""
-        from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PPROG, PSETTLE
+        ``pool.claim_masks``; with a third item True, "runs": it holds its
+        own and never claims)."""
+        from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PPROG, PRUNS, PSETTLE
 
         self.ctrl[:] = 0
         self.ctrl[JITTER] = self.jitter
@@ -871,6 +872,7 @@ class Workers:
         pctl[:nd, PSETTLE] = 0
         pctl[nd + 1:, POWN] = masks[0]
         pctl[nd + 1:, PALLOW] = masks[1]
+        pctl[nd + 1:, PRUNS] = int(len(masks) > 2 and masks[2])
         if isinstance(self.fault, tuple) and self.fault[0] == "stall":
             pctl[0, POWNER] = 1 << 20  # taken before any worker can (hold_until_abort)
         tctl = cache_aligned((self.threads * NTCTL,), np.int64)

@@ -79,6 +79,20 @@ minutes the two threads' cores are far apart (separate caches) and 0.90-1.05
 times as fast when they are near (the ring, N = 2e5: 1 % slower, the cost of
 the adjacency); "home" 0-16 % faster far and 1-6 % slower near.
 
+**Own runs, no claims** (``"runs"``, the default since 2026-12-06).  Each
+thread holds its run of domains (cut as for ``"band"``) for the whole step
+and never takes another's: no claims, no releases, no asking.  After each
+event it looks at the earliest of its own domains (``_pick_own``); an
+event that waits for none but its own domains is ordered by their clocks
+alone (only this thread runs them; another writes them only to hand one
+an event, under the lock) and runs as an interior one (its commit still
+checks, as every event with another domain in its masks does); only an
+event that also waits for another thread's domains publishes its times and
+looks twice.  When every own domain waits, the thread spins a little
+(``RUNS_SPINS``) before it yields.  Measured on the bed, paired, against
+``"band"`` in the same processes: 1-3 % faster, and no repairs in 96 steps
+where "band" had 5 (README, Benchmarks: "Own runs, no claims").
+
 **Asking.**  A pick held back by a domain of another thread's own run
 (``_blocker`` names it) asks that thread to run it (``_ask``), and that
 thread, after its event in flight, takes it when it is free (``_answer``;
@@ -103,14 +117,23 @@ from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits,
                       sched_yield, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
 from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_ASKED, S_BLOCKED, S_CLAIMS, S_CONC,
-                      S_REACHOUT, S_VIOL, STALL, VIOLATION, hop2, init_range, journal_room,
-                      process_event)
+                      S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, hop2, init_range,
+                      journal_room, process_event)
 from .neighbors import LCOUNT
 from .parallel import (ABORT, JITTER, NOWAIT, TIME_EVERY, _fail, _pause, _progress,
                        cache_aligned, next_task, wait_blocked)
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
+# under ``pool_claim = "runs"`` a thread whose own domains all wait for another
+# thread's first spins RUNS_SPINS times RUNS_PAUSES pauses (a few hundred ns
+# each; about 0.1 ms in all), looking again after each, before the waits of
+# ``parallel.wait_blocked`` (a yield, a system call, each).  Measured on the
+# bed against "band" in the same processes (16 steps each, paired with the
+# sequential engine): 3.0 and 3.1 % faster with the spin, 0.5-2.1 % with the
+# yields alone (README, Benchmarks: "Own runs, no claims")
+RUNS_SPINS = 256
+RUNS_PAUSES = 8
 # the interior window (in a domain's mean times between events) of a step redone
 # on the threads after a violation (``Engine.pool_redo``).  Measured on the bed,
 # 16 domains: the default window of 8 events repairs the sixth step of every
@@ -134,8 +157,9 @@ NPCTL = 32
 # the masks (counted by the engine: ``Engine.pool_checked_steps``)
 PCHECKED = 0
 # then a row per thread: the domains it claims first and those it may claim
-# (``claim_masks``), read once by its worker
-POWN, PALLOW = 0, 1
+# (``claim_masks``), and 1 when it runs its own domains only, never claiming
+# ("runs"), read once by its worker
+POWN, PALLOW, PRUNS = 0, 1, 2
 # per-thread row of tctl (two cache lines): in flight; on the second line, the
 # domain another thread asks it to run, plus one (0: none; ``_ask``), written
 # by the asker, so the thread's own stores to its first line never miss
@@ -365,6 +389,26 @@ def _claim_in(dctl, lo, hi, me, dtb, tried):
 
 
 @kernel(inline=True)
+def _pick_own(dctl, own, tried, dtb):
+    """Under ``pool_claim = "runs"``: the thread's own domain (mask ``own``,
+    never claimed by another) with the earliest clock before the step end
+    that is not in ``tried``; -1 if none."""
+    best = -1
+    bc = dtb
+    m = own & ~tried
+    e = 0
+    while m != 0:
+        if m & 1:
+            c = load(dctl, e * NPCTL + PCLOCK)
+            if c < bc:
+                bc = c
+                best = e
+        m >>= 1
+        e += 1
+    return best
+
+
+@kernel(inline=True)
 def _claim(dctl, ndom, me, dtb, tried, own, allowed):
     """Claim a domain (``_claim_in``): among the thread's own domains (mask
     ``own``) first, then among those it may take (``allowed``, which holds
@@ -513,6 +557,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     nowait = load(ctrl, NOWAIT) != 0
     own = load(dctl, (ndom + 1 + me) * NPCTL + POWN)
     allowed = load(dctl, (ndom + 1 + me) * NPCTL + PALLOW)
+    runs = load(dctl, (ndom + 1 + me) * NPCTL + PRUNS) != 0
     d = 0
     i = 0
     p = -1
@@ -520,6 +565,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     t = 0.0
     tb = float_bits(t)
     w = np.int64(0)
+    wall = np.int64(0)
     late = False
     while True:
         if load(ctrl, ABORT) != 0:
@@ -538,7 +584,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 return OK
             blocked = True
         if not blocked and cur < 0:
-            cur = _claim(dctl, ndom, me, dtb, tried, own, allowed)
+            if runs:
+                cur = _pick_own(dctl, own, tried, dtb)
+            else:
+                cur = _claim(dctl, ndom, me, dtb, tried, own, allowed)
             if cur < 0:
                 if tried != 0:
                     # every free domain was tried since the last event or wait:
@@ -566,7 +615,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             if rng != 0:  # fault injection: widens the gap a stale pick comes through
                 rng = _pause(rng)
             if i < 0 or not t < dt:
-                store(dctl, d * NPCTL + POWNER, -1)
+                if runs:  # its clock was behind the root: the others first
+                    tried |= np.int64(1) << d
+                else:
+                    store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
                 continue
             tb = float_bits(t)
@@ -584,7 +636,19 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)
             late = tb <= dctl[d * NPCTL + PHIGH]
-            if w == 0 and not strict:
+            wall = w  # every other domain the event waits for: its commit checks them
+            if runs and not strict and w & own != 0:
+                # "runs": this thread alone runs its own domains, so they are
+                # ordered by their clocks alone (lines no other thread writes but
+                # to hand one an event), and the event is interior unless it also
+                # waits for another thread's domains: no published times, no
+                # second look (its commit still checks: ``wall``)
+                x = _blocker(dctl, dtour_t, dtour_s, ids, w & own, tb, t, ids[i])
+                blocked = x >= 0
+                w &= ~own
+            if blocked:
+                pass  # held back by one of its own domains
+            elif w == 0 and not strict:
                 if t > oclock + window:
                     oclock = bits_float(_others_clock(dctl, d, ndom))
                     blocked = t > oclock + window
@@ -624,16 +688,26 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                         continue
             if blocked:
                 st[S_BLOCKED] += 1
-                store(dctl, d * NPCTL + POWNER, -1)
+                if not runs:
+                    store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
                 # try the other free domains before any wait: a yield after every
                 # blocked pick cost more than the waits themselves (README, Benchmarks)
                 tried |= np.int64(1) << d
-                if x >= 0 and (own >> x) & 1 == 0:
+                if x >= 0 and (own >> x) & 1 == 0 and not runs:
                     # held back by another thread's domain: ask that thread to
                     # run it (measured on the bed: README, Benchmarks "Asking")
                     _ask(dctl, tctl, ndom, nthr, me, x)
                 continue
+        if blocked and runs and nblk < RUNS_SPINS:
+            # every own domain waits: spin a little before any yield (a system
+            # call); the thread that holds them back is at work
+            c0 = cycles()
+            for _ in range(RUNS_PAUSES):
+                cpu_relax()
+            nblk += 1
+            st[S_WAIT] += cycles() - c0
+            continue
         if blocked:
             wait_from, checked, seen, nblk, stalled = wait_blocked(
                 dctl, ndom, NPCTL, PPROG, st, waiting, wait_from, checked, seen, nblk,
@@ -654,7 +728,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         dctl[d * NPCTL + PNEV] = nev + 1  # d is this thread's: a plain write
         timed = nev % TIME_EVERY == 0
         c0 = cycles() if timed else 0
-        check = w != 0 or late or strict
+        check = wall != 0 or late or strict
         r0 = st[S_REACHOUT]
         if evt[i] != t or evp[i] != p:
             # i's event changed since it was read, and after the last look: another
@@ -717,7 +791,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         if status != OK:
             _fail(ctrl, status)
             return status
-        cur = _answer(dctl, tctl, me, cur, st)
+        if runs:
+            cur = -1  # the earliest of its own domains next
+        else:
+            cur = _answer(dctl, tctl, me, cur, st)
 
 
 @kernel
@@ -775,6 +852,9 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     * ``"earliest"``: any domain (own = allowed = all).
     * ``"home"``: its share of the domains in slot order (``home_range``)
       first, then any.
+    * ``"runs"``: its run as for ``"band"``, and no other domain (a thread
+      whose run is empty runs none); returns ``(own, allowed, True)``: the
+      worker then never claims (``pool_worker``).
     * ``"band"``: its run of the domains in slot order, cut at equal shares
       of ``work`` (nd,) (the engine passes each domain's cycles inside its
       events in the last step, ``PCYC``, sampled: ``TIME_EVERY``; equal
@@ -788,6 +868,9 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     full = (1 << nd) - 1
     own = [full] * nthr
     allowed = [full] * nthr
+    if claim == "runs":
+        own = claim_masks("band", nd, nthr, np.zeros(nd, np.int64), work)[0]
+        return own, own.copy(), True
     if claim == "home":
         own = [sum(1 << d for d in range(*home_range(k, nthr, nd))) for k in range(nthr)]
     elif claim == "band":

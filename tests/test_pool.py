@@ -23,9 +23,9 @@ from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
 from lockgraph.neighbors import JCOUNT
 from lockgraph.parallel import TIME_EVERY
-from lockgraph.pool import (NPCTL, NTCTL, POWN, POWNER, REDO_WINDOW, TASK, _answer, _ask,
-                            claim_masks, clear_words, domain_adjacency, domain_of, home_range,
-                            pool_state, two_hop_masks, work_split)
+from lockgraph.pool import (NPCTL, NTCTL, PCLOCK, POWN, POWNER, REDO_WINDOW, TASK, _answer,
+                            _ask, _pick_own, claim_masks, clear_words, domain_adjacency,
+                            domain_of, home_range, pool_state, two_hop_masks, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -52,7 +52,8 @@ def test_pool_equals_sequential(sequential, name, which, domains, threads):
 
 @pytest.mark.parametrize("split,claim", [("work", "home"), ("work", "earliest"),
                                          ("tree", "home"), ("tree", "earliest"),
-                                         ("tree", "band"), ("work", "band")])
+                                         ("tree", "band"), ("work", "band"),
+                                         ("tree", "runs"), ("work", "runs")])
 @pytest.mark.parametrize("threads", [2, 3])
 @pytest.mark.parametrize("name", ["ring", "dish_marble"])
 def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, split, claim):
@@ -189,8 +190,34 @@ def test_claim_masks():
     full63 = (1 << 63) - 1
     own, allowed = claim_masks("band", 63, 2, [full63] * 63)
     assert int(own[0]) | int(own[1]) == full63 and list(allowed) == [full63, full63]
+    # "runs": the band's runs and nothing else, an empty run included
+    own, allowed, runs = claim_masks("runs", 8, 2, None, work)
+    assert list(own) == [0b11, full & ~0b11] and list(allowed) == list(own) and runs is True
+    own, allowed, runs = claim_masks("runs", 2, 3, None, [100, 0])
+    assert list(own) == [0, 0b1, 0b10] and list(allowed) == list(own)
     with pytest.raises(ValueError):
         claim_masks("nearest", 8, 2)
+
+
+def test_a_runs_thread_picks_its_earliest_own_domain():
+    """``_pick_own``: among the thread's own domains not yet tried, the one
+    with the earliest clock before the step end (float bits compared as
+    integers); -1 when none is left."""
+    nd = 6
+    dctl = np.zeros((nd + 1) * NPCTL, np.int64)
+    clocks = [0.3, 0.1, 0.2, 0.05, np.inf, 0.15]
+    for d, c in enumerate(clocks):
+        dctl[d * NPCTL + PCLOCK] = np.float64(c).view(np.int64)
+    dtb = np.float64(1.0).view(np.int64)
+    own = 0b100111  # domains 0, 1, 2, 5 (3 is another thread's, and earlier)
+    assert _pick_own(dctl, own, 0, dtb) == 1
+    assert _pick_own(dctl, own, 0b10, dtb) == 5
+    assert _pick_own(dctl, own, 0b100010, dtb) == 2
+    assert _pick_own(dctl, own, 0b100110, dtb) == 0
+    assert _pick_own(dctl, own, 0b100111, dtb) == -1
+    assert _pick_own(dctl, own, 0, np.float64(0.12).view(np.int64)) == 1
+    assert _pick_own(dctl, own, 0b10, np.float64(0.12).view(np.int64)) == -1  # past the end
+    assert _pick_own(dctl, 0b10000, 0, dtb) == -1  # its one domain has no event
 
 
 def test_home_ranges_tile_the_domains():
@@ -496,14 +523,16 @@ def masks_by_bfs(rows, sdom, s):
     return tuple(out)
 
 
-def test_pool_stall_is_an_error_not_a_hang():
-    """A thread that takes a domain and never lets go: the other thread, which
-    could run every other domain, stalls on it and says so; the state is
-    left at the last completed step."""
+@pytest.mark.parametrize("claim", ["runs", "band"])
+def test_pool_stall_is_an_error_not_a_hang(claim):
+    """A thread that takes a domain and never lets go ("band"), or never runs
+    its own ("runs"): the other thread, which could run every other domain,
+    stalls on it and says so; the state is left at the last completed step."""
     cfg = SMALL["dish"]
     sc = scenarios.load("dish", n=cfg["n"], params=cfg["params"])
     eng = Engine(sc.state, sc.physics, sc.dt, threads=2, schedule="pool", stall_seconds=0.5)
     eng.pool_domains = 2
+    eng.pool_claim = claim
     stall_is_an_error(eng)
 
 
@@ -530,7 +559,7 @@ def test_pool_statistics_and_options():
         Engine(st, ph, 0.05, threads=2, schedule="pool", policy="paper")
     eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
     try:
-        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "band", "threads")
+        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "runs", "threads")
         assert eng.pool_masks == "auto"
         with pytest.raises(InputError,
                            match="^pool_masks: must be 'auto' or 'start' or 'first_use'"):
@@ -538,11 +567,11 @@ def test_pool_statistics_and_options():
         with pytest.raises(InputError, match="^pool_split: must be 'work' or 'tree'"):
             eng.pool_split = "equal"
         with pytest.raises(InputError,
-                           match="^pool_claim: must be 'band' or 'earliest' or 'home'"):
+                           match="^pool_claim: must be 'runs' or 'band' or 'earliest' or 'home'"):
             eng.pool_claim = None
         with pytest.raises(InputError, match="^pool_redo: must be 'threads' or 'one'"):
             eng.pool_redo = "sequential"
-        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "band", "threads")
+        assert (eng.pool_split, eng.pool_claim, eng.pool_redo) == ("tree", "runs", "threads")
     finally:
         eng.close()
 
@@ -560,7 +589,10 @@ def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
             repairs = eng.repairs
             eng.step()
             work = eng._pool_work
-            assert work is not None and len(work) == 4
+            if work is None:  # no step yet whose events all ran on the threads
+                assert eng.repairs > repairs  # (measured: 1 in 300 steps with 8 domains)
+                continue
+            assert len(work) == 4
             if eng.repairs == repairs:  # one attempt: its counts alone
                 assert work.sum() == eng.step_stats[K.S_CONC] > 0
                 assert work.sum() % TIME_EVERY == 0
@@ -602,13 +634,14 @@ def test_a_thread_asks_the_owner_of_what_held_its_pick_back():
 
 
 def test_pool_stats_count_the_asked_switches(sequential):
-    """On the marble dish with its domains cut in bands, the threads' asks
+    """On the marble dish with its domains claimed by "band", the threads' asks
     are counted in the statistics, and the run stays the sequential one.
     (Measured: 7,000-16,000 asked switches in this run with 4 and 8 domains;
     none would mean the asks are never made or never answered.)"""
     sc, want_hash, want_seq = sequential("dish_marble", "late")
     sim = Simulation(sc.state, sc.physics, sc.dt, threads=2, schedule="pool", leaf_size=4)
     sim._engine.pool_domains = 8
+    sim._engine.pool_claim = "band"  # "runs" never asks
     try:
         sim.run(STEPS["dish_marble"])
         assert sim.state.sha256() == want_hash
