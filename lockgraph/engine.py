@@ -1201,7 +1201,8 @@ class Engine:
         window = window_events * self.dt / per_domain
         status = self._on_threads(st, img_pos, img_vel, full, lambda bundles, stt:
                                   self.workers.run_pool(bundles, stt, locks, pst, queues,
-                                                        pctl, window, masks))
+                                                        pctl, window, masks,
+                                                        self._pool_claim == "runs"))
         if status == K.OK:
             # counted once a step, and the band cut of the next step (and of a
             # redo) from the events of a whole step, not of a stopped attempt

@@ -844,7 +844,7 @@ class Workers:
             self.wall_s += time.perf_counter() - t0
         return int(self.ctrl[STATUS])
 
-    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window, masks):
+    def run_pool(self, bundles, stt, locks, pst, doms, pctl, window, masks, runs=False):
         """``schedule="pool"``: run ``pool.pool_worker`` on every thread until the
         step's events are done or one stops with a status; returns that status.
         ``pctl`` (domains x ``pool.NPCTL``, cache-aligned) keeps each domain's
@@ -852,8 +852,8 @@ class Workers:
         journal resumes the step); its clocks and owners are set here, and
         after the domains' rows and the step's row, a row per thread: the
         domains it claims first and those it may claim (``masks``, from
-        ``pool.claim_masks``; with a third item True, "runs": it holds its
-        own and never claims)."""
+        ``pool.claim_masks``), and ``runs``: each holds its own domains and
+        never claims (``Engine.pool_claim = "runs"``)."""
         from .pool import NTCTL, PALLOW, PCLOCK, PHIGH, PINFL, POWN, POWNER, PPROG, PRUNS, PSETTLE
 
         self.ctrl[:] = 0
@@ -872,7 +872,7 @@ class Workers:
         pctl[:nd, PSETTLE] = 0
         pctl[nd + 1:, POWN] = masks[0]
         pctl[nd + 1:, PALLOW] = masks[1]
-        pctl[nd + 1:, PRUNS] = int(len(masks) > 2 and masks[2])
+        pctl[nd + 1:, PRUNS] = int(runs)
         if isinstance(self.fault, tuple) and self.fault[0] == "stall":
             pctl[0, POWNER] = 1 << 20  # taken before any worker can (hold_until_abort)
         tctl = cache_aligned((self.threads * NTCTL,), np.int64)

@@ -800,8 +800,9 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
 @kernel
 def hold_until_abort(dctl, ctrl):
     """Tests: the thread holding domain 0 (taken for it before the workers
-    start: ``Workers.run_pool``) never runs or releases it, so the others
-    can only stall — and must say so."""
+    start: ``Workers.run_pool``) never runs or releases it (under "runs":
+    never runs its own domains), so the others can only stall — and must
+    say so."""
     while load(ctrl, ABORT) == 0:
         sched_yield()
     store(dctl, POWNER, -1)
@@ -853,8 +854,8 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     * ``"home"``: its share of the domains in slot order (``home_range``)
       first, then any.
     * ``"runs"``: its run as for ``"band"``, and no other domain (a thread
-      whose run is empty runs none); returns ``(own, allowed, True)``: the
-      worker then never claims (``pool_worker``).
+      whose run is empty runs none); the engine then tells the workers
+      never to claim (``Workers.run_pool``'s ``runs``).
     * ``"band"``: its run of the domains in slot order, cut at equal shares
       of ``work`` (nd,) (the engine passes each domain's cycles inside its
       events in the last step, ``PCYC``, sampled: ``TIME_EVERY``; equal
@@ -868,12 +869,9 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     full = (1 << nd) - 1
     own = [full] * nthr
     allowed = [full] * nthr
-    if claim == "runs":
-        own = claim_masks("band", nd, nthr, np.zeros(nd, np.int64), work)[0]
-        return own, own.copy(), True
     if claim == "home":
         own = [sum(1 << d for d in range(*home_range(k, nthr, nd))) for k in range(nthr)]
-    elif claim == "band":
+    elif claim in ("band", "runs"):
         w = np.ones(nd, np.int64) if work is None else np.asarray(work, np.int64) + 1
         cum = np.concatenate([[0], np.cumsum(w)])
         # run k ends at the domain edge nearest k/nthr of the total (integers)
@@ -882,9 +880,10 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
         for k in range(nthr):
             own[k] = sum(1 << d for d in range(cut[k], cut[k + 1]))
             near = own[k]
-            for d in range(cut[k], cut[k + 1]):
-                near |= int(adj[d])
-            allowed[k] = near if own[k] else full
+            if claim == "band":
+                for d in range(cut[k], cut[k + 1]):
+                    near |= int(adj[d])
+            allowed[k] = near if own[k] or claim == "runs" else full
     elif claim != "earliest":
         raise ValueError(f"unknown claim {claim!r}")
     return (np.array(own, np.uint64).view(np.int64), np.array(allowed, np.uint64).view(np.int64))

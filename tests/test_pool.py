@@ -191,9 +191,10 @@ def test_claim_masks():
     own, allowed = claim_masks("band", 63, 2, [full63] * 63)
     assert int(own[0]) | int(own[1]) == full63 and list(allowed) == [full63, full63]
     # "runs": the band's runs and nothing else, an empty run included
-    own, allowed, runs = claim_masks("runs", 8, 2, None, work)
-    assert list(own) == [0b11, full & ~0b11] and list(allowed) == list(own) and runs is True
-    own, allowed, runs = claim_masks("runs", 2, 3, None, [100, 0])
+    own, allowed = claim_masks("runs", 8, 2, None, work)
+    assert list(own) == [0b11, full & ~0b11] and list(allowed) == list(own)
+    assert list(own) == list(claim_masks("band", 8, 2, adj, work)[0])
+    own, allowed = claim_masks("runs", 2, 3, None, [100, 0])
     assert list(own) == [0, 0b1, 0b10] and list(allowed) == list(own)
     with pytest.raises(ValueError):
         claim_masks("nearest", 8, 2)
