@@ -29,7 +29,8 @@ from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
-                   init_domains, pool_state, restore_start, two_hop_masks, work_split)
+                   init_domains, pool_state, restore_start, two_hop_masks, work_split,
+                   cost_cut, slot_costs)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -406,6 +407,11 @@ class Engine:
         # (``claim_masks``'s work), and this step's domain adjacency (filled
         # by ``init_domains``)
         self._pool_work = None
+        # the cost of slots 0..s-1 in the last pool step's events, s = 0..N
+        # (``pool.slot_costs``), and this step's domains' share of it
+        self._pool_slot_cost = None
+        self._pool_dwork = None
+        self._pool_last = None
         self._pool_adj = np.zeros(0, np.int64)
         self._pool_cuts = None  # (dlo, dhi): the last pool step's work_split
         # pool steps in which a pair found mid-step broke the masks (``kernels.expose_pair``;
@@ -922,6 +928,7 @@ class Engine:
                 # each domain's first events, then the domain's queue
                 nd = self._pool_count() if self.schedule == "pool" else self.threads
                 dlo, dhi = self._pool_ranges(nd) if self.schedule == "pool" else self._domains(nd)
+                nd = len(dlo)
                 q = tournament_size(int((dhi - dlo).max()))
                 dtour_t = cache_aligned((nd, 2 * q), np.float64, np.inf)
                 dtour_s = cache_aligned((nd, 2 * q), np.int32, -1)
@@ -1171,9 +1178,16 @@ class Engine:
     def _pool_ranges(self, nd):
         """The slot ranges of the pool's nd domains this step (``pool_split``)."""
         cuts = self._pool_cuts
+        self._pool_dwork = None
         if self._pool_split == "work" and cuts is not None and len(cuts[0]) == nd:
             return cuts  # fresh arrays each step, read only
-        return self._domains(nd)
+        dlo, dhi = self._domains(nd)
+        c = self._pool_slot_cost
+        if self._pool_claim in ("band", "runs") and c is not None and len(c) == self.n + 1:
+            # the threads' runs end at equal shares of the cost, inside a domain
+            # if need be (that domain split in two), not at the nearest edge
+            dlo, dhi, self._pool_dwork = cost_cut(dlo, dhi, c, self.threads)
+        return dlo, dhi
 
     def _pool_count(self):
         """The pool's domains: ``pool_domains`` rounded down to a power of two
@@ -1189,10 +1203,12 @@ class Engine:
         ``Workers.window_events``)."""
         dlo, dhi, dtour_t, dtour_s = queues
         nd = len(dlo)
+        self._pool_last = (dlo, dhi)  # this step's domains, for the tests
         # and the step's row (PCHECKED), and the threads' claim masks
         pctl = cache_aligned((nd + 1 + self.threads, NPCTL), np.int64)
         pctl[:, PHIGH] = -1
-        work = self._pool_work if self._pool_work is not None and len(self._pool_work) == nd \
+        work = self._pool_dwork if self._pool_dwork is not None and len(self._pool_dwork) == nd \
+            else self._pool_work if self._pool_work is not None and len(self._pool_work) == nd \
             else None
         masks = claim_masks(self._pool_claim, nd, self.threads, self._pool_adj, work)
         per_domain = max(self.last_events / nd, 1.0)
@@ -1212,6 +1228,7 @@ class Engine:
             # thread more to take from the other's run (README, Benchmarks:
             # "A band cut by cycles")
             self._pool_work = pctl[:nd, PCYC].copy()
+            self._pool_slot_cost = slot_costs(self._pool_work, dlo, dhi, self.cis)
         return status
 
     @staticmethod

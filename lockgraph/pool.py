@@ -93,6 +93,25 @@ looks twice.  When every own domain waits, the thread spins a little
 ``"band"`` in the same processes: 1-3 % faster, and no repairs in 96 steps
 where "band" had 5 (README, Benchmarks: "Own runs, no claims").
 
+Three refinements of the runs (2026-12-06, README, Benchmarks: "Held picks,
+own checks, a cut by cost"):
+
+* *Held picks.*  A domain whose root event was held back remembers by what
+  (``_still_blocked``): until its root changes, later picks read only that
+  domain's clock line, not the masks and the looks again (blocked picks on
+  the bed: 0.18 an event, from 1.07).
+* *Checks by the other threads' domains.*  An event's commit checks only
+  when its masks hold another thread's domain (or it is late, or strict):
+  an event of another thread that writes or reads what this one reads or
+  writes has a particle within one candidate hop of this event's, so that
+  thread's domain is in this event's two-hop masks.
+* *A cut by cost.*  The runs end where the last step's cost (each domain's
+  cycles shared over its slots by their collisions: ``slot_costs``)
+  reaches equal shares, inside a domain if need be, which is then split in
+  two (``cost_cut``; the domains are then one more than
+  ``Engine.pool_domains``).  At the nearest domain edge the two threads'
+  cycles differed by up to 20 % on the bed.
+
 **Asking.**  A pick held back by a domain of another thread's own run
 (``_blocker`` names it) asks that thread to run it (``_ask``), and that
 thread, after its event in flight, takes it when it is free (``_answer``;
@@ -389,23 +408,42 @@ def _claim_in(dctl, lo, hi, me, dtb, tried):
 
 
 @kernel(inline=True)
-def _pick_own(dctl, own, tried, dtb):
+def _still_blocked(dctl, e, bx, bt, bv):
+    """Is domain e's root event still held back by the domain that held it
+    back when last picked (``bx[e]``, -1: none)?  Only while e's queue
+    version is ``bv[e]`` (the same root) and that domain still has an event
+    in flight not later than the root's time ``bt[e]`` or a clock before it
+    (one line of the blocker read, not the pick's masks and looks)."""
+    x = bx[e]
+    if x < 0 or load(dctl, e * NPCTL + PVER) != bv[e]:
+        return False
+    tb = bt[e]
+    return load(dctl, x * NPCTL + PINFL) <= tb or load(dctl, x * NPCTL + PCLOCK) < tb
+
+
+@kernel(inline=True)
+def _pick_own(dctl, own, tried, dtb, bx, bt, bv):
     """Under ``pool_claim = "runs"``: the thread's own domain (mask ``own``,
     never claimed by another) with the earliest clock before the step end
-    that is not in ``tried``; -1 if none."""
+    that is not in ``tried`` and not still held back (``_still_blocked``);
+    -1 if none.  Also returns whether a domain was passed over as held back."""
     best = -1
     bc = dtb
+    held = False
     m = own & ~tried
     e = 0
     while m != 0:
         if m & 1:
             c = load(dctl, e * NPCTL + PCLOCK)
             if c < bc:
-                bc = c
-                best = e
+                if _still_blocked(dctl, e, bx, bt, bv):
+                    held = True
+                else:
+                    bc = c
+                    best = e
         m >>= 1
         e += 1
-    return best
+    return best, held
 
 
 @kernel(inline=True)
@@ -545,6 +583,12 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     seen_i = seen[1][me]
     seen_t = seen[2][me]
     seen_v[:] = -1
+    # under "runs", per own domain: the domain that held back its root event
+    # (-1: none), that event's time (float bits) and the queue's version then
+    bx = seen[3][me]
+    bt = seen[4][me]
+    bv = seen[5][me]
+    bx[:] = -1
     tried = np.int64(0)  # domains whose next event was blocked since the last event or wait
     oclock = -INF
     waiting = False
@@ -584,12 +628,15 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 return OK
             blocked = True
         if not blocked and cur < 0:
+            held = False
             if runs:
-                cur = _pick_own(dctl, own, tried, dtb)
+                cur, held = _pick_own(dctl, own, tried, dtb, bx, bt, bv)
             else:
                 cur = _claim(dctl, ndom, me, dtb, tried, own, allowed)
             if cur < 0:
-                if tried != 0:
+                if held:
+                    tried = 0  # own domains held back: wait, then look again
+                elif tried != 0:
                     # every free domain was tried since the last event or wait:
                     # wait once, then try them all again
                     tried = 0
@@ -636,7 +683,12 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)
             late = tb <= dctl[d * NPCTL + PHIGH]
-            wall = w  # every other domain the event waits for: its commit checks them
+            # every other domain the event waits for: its commit checks them (under
+            # "runs", the other threads' domains only: this thread's own are
+            # ordered by its picks alone, and an event of another thread that
+            # writes or reads what this one does puts that thread's domain in
+            # these masks)
+            wall = w & ~own if runs else w
             if runs and not strict and w & own != 0:
                 # "runs": this thread alone runs its own domains, so they are
                 # ordered by their clocks alone (lines no other thread writes but
@@ -688,6 +740,10 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                         continue
             if blocked:
                 st[S_BLOCKED] += 1
+                if runs and x >= 0:
+                    bx[d] = x
+                    bt[d] = tb
+                    bv[d] = seen_v[d]
                 if not runs:
                     store(dctl, d * NPCTL + POWNER, -1)
                 cur = -1
@@ -826,7 +882,8 @@ def pool_state(n, nd, threads, keep, tracked=0):
     locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
     width = -(-nd // 8) * 8  # whole cache lines: a row is one thread's
     seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
-            cache_aligned((threads, width)))
+            cache_aligned((threads, width)), cache_aligned((threads, width), np.int64),
+            cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64))
     return (hops, wt, sdom, seen), locks
 
 
@@ -887,3 +944,35 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     elif claim != "earliest":
         raise ValueError(f"unknown claim {claim!r}")
     return (np.array(own, np.uint64).view(np.int64), np.array(allowed, np.uint64).view(np.int64))
+
+
+def slot_costs(work, dlo, dhi, cis):
+    """The cost of slots 0..s-1 for s = 0..N (float64 (N+1,)): each domain's
+    cycles ``work`` (nd,) shared out over its slots by their collisions in
+    the step (``cis``) plus one."""
+    w = np.asarray(cis, np.float64) + 1.0
+    cw = np.concatenate([[0.0], np.cumsum(w)])
+    per = np.asarray(work, np.float64) / np.maximum(cw[dhi] - cw[dlo], 1.0)
+    cost = w * np.repeat(per, dhi - dlo)
+    return np.concatenate([[0.0], np.cumsum(cost)])
+
+
+def cost_cut(dlo, dhi, ccum, nthr):
+    """Domains (dlo, dhi) with one more edge at each slot where the cost
+    ``ccum`` (``slot_costs``) reaches k/nthr of its total (k = 1..nthr-1),
+    the domain holding it split in two; and each domain's cost (int64)."""
+    lo = [int(x) for x in dlo]
+    hi = [int(x) for x in dhi]
+    for k in range(1, nthr):
+        if len(lo) >= MAX_DOMAINS:
+            break
+        s = int(np.abs(ccum - ccum[-1] * k / nthr).argmin())
+        for q in range(len(lo)):
+            if lo[q] < s < hi[q]:
+                lo.insert(q + 1, s)
+                hi.insert(q, s)
+                break
+    lo = np.array(lo, np.int64)
+    hi = np.array(hi, np.int64)
+    work = np.rint(ccum[hi] - ccum[lo]).astype(np.int64)
+    return lo, hi, work

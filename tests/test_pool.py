@@ -23,9 +23,10 @@ from lockgraph.physics import Physics
 from lockgraph.kernels import hop1, hop2, regions_adjacent
 from lockgraph.neighbors import JCOUNT
 from lockgraph.parallel import TIME_EVERY
-from lockgraph.pool import (NPCTL, NTCTL, PCLOCK, POWN, POWNER, REDO_WINDOW, TASK, _answer,
-                            _ask, _pick_own, claim_masks, clear_words, domain_adjacency,
-                            domain_of, home_range, pool_state, two_hop_masks, work_split)
+from lockgraph.pool import (NPCTL, NTCTL, PCLOCK, PINFL, POWN, POWNER, PVER, REDO_WINDOW, TASK,
+                            _answer, _ask, _pick_own, claim_masks, clear_words, cost_cut,
+                            domain_adjacency, domain_of, home_range, pool_state, slot_costs,
+                            two_hop_masks, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
 from lockgraph.state import State
@@ -66,7 +67,7 @@ def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, spli
     steps_match(eng, STEPS[name], want_hash, want_seq)
     assert (eng._pool_cuts is not None) == (split == "work")  # the work split was used
     if claim == "band" and split == "tree":  # the last step's adjacency, by brute force
-        dlo, dhi = eng._pool_ranges(len(eng._pool_adj))
+        dlo, dhi = eng._pool_last
         assert list(eng._pool_adj) == adjacency_by_brute_force(eng.noff, eng.nent, dlo, dhi)
 
 
@@ -211,14 +212,94 @@ def test_a_runs_thread_picks_its_earliest_own_domain():
         dctl[d * NPCTL + PCLOCK] = np.float64(c).view(np.int64)
     dtb = np.float64(1.0).view(np.int64)
     own = 0b100111  # domains 0, 1, 2, 5 (3 is another thread's, and earlier)
-    assert _pick_own(dctl, own, 0, dtb) == 1
-    assert _pick_own(dctl, own, 0b10, dtb) == 5
-    assert _pick_own(dctl, own, 0b100010, dtb) == 2
-    assert _pick_own(dctl, own, 0b100110, dtb) == 0
-    assert _pick_own(dctl, own, 0b100111, dtb) == -1
-    assert _pick_own(dctl, own, 0, np.float64(0.12).view(np.int64)) == 1
-    assert _pick_own(dctl, own, 0b10, np.float64(0.12).view(np.int64)) == -1  # past the end
-    assert _pick_own(dctl, 0b10000, 0, dtb) == -1  # its one domain has no event
+    bx = np.full(nd, -1, np.int64)  # none held back
+    bt = np.zeros(nd, np.int64)
+    bv = np.zeros(nd, np.int64)
+
+    def pick(tried, end=dtb, own=own):
+        return _pick_own(dctl, own, tried, end, bx, bt, bv)
+
+    assert pick(0) == (1, False)
+    assert pick(0b10) == (5, False)
+    assert pick(0b100010) == (2, False)
+    assert pick(0b100110) == (0, False)
+    assert pick(0b100111) == (-1, False)
+    assert pick(0, np.float64(0.12).view(np.int64)) == (1, False)
+    assert pick(0b10, np.float64(0.12).view(np.int64)) == (-1, False)  # past the end
+    assert pick(0, own=0b10000) == (-1, False)  # its one domain has no event
+
+
+def test_a_held_pick_waits_for_its_blocker_alone():
+    """``_pick_own`` passes over a domain whose root event was held back
+    (``bx``: by which domain; ``bt``: the event's time; ``bv``: the queue's
+    version then) while that domain still has an earlier clock or an event in
+    flight not later, and only while the root is the same (``_still_blocked``)."""
+    nd = 6
+    dctl = np.zeros((nd + 1) * NPCTL, np.int64)
+    for d in range(nd):
+        dctl[d * NPCTL + PINFL] = np.float64(np.inf).view(np.int64)
+    clocks = [0.3, 0.1, 0.2, 0.05, np.inf, 0.15]
+    for d, c in enumerate(clocks):
+        dctl[d * NPCTL + PCLOCK] = np.float64(c).view(np.int64)
+    dctl[1 * NPCTL + PVER] = 7
+    dtb = np.float64(1.0).view(np.int64)
+    own = 0b100111
+    bits = lambda t: np.float64(t).view(np.int64)
+    bx = np.full(nd, -1, np.int64)
+    bt = np.zeros(nd, np.int64)
+    bv = np.zeros(nd, np.int64)
+    bx[1], bt[1], bv[1] = 3, bits(0.1), 7  # domain 1's root (0.1) held back by 3 (0.05)
+    assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (5, True)
+    assert _pick_own(dctl, own, 0b100101, dtb, bx, bt, bv) == (-1, True)  # nothing else
+    dctl[3 * NPCTL + PCLOCK] = bits(0.1)  # a tie: the ids decide, so the full look
+    assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (1, False)
+    dctl[3 * NPCTL + PCLOCK] = bits(0.2)
+    dctl[3 * NPCTL + PINFL] = bits(0.1)  # an event in flight at the same time holds it
+    assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (5, True)
+    dctl[3 * NPCTL + PINFL] = bits(0.11)  # later: free
+    assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (1, False)
+    dctl[3 * NPCTL + PINFL] = bits(0.05)
+    dctl[1 * NPCTL + PVER] = 8  # its queue changed: a new root, looked at afresh
+    assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (1, False)
+
+
+def test_slot_costs_share_each_domains_cycles_by_collisions():
+    """``slot_costs``: slots 0..s-1's cost, each domain's cycles shared over
+    its slots in proportion to their collisions plus one (exact in binary
+    fractions here)."""
+    dlo = np.array([0, 2, 6])
+    dhi = np.array([2, 6, 6])  # the last one empty
+    cis = np.array([1, 3, 0, 0, 1, 2])
+    c = slot_costs(np.array([12, 8, 5]), dlo, dhi, cis)
+    # domain 0: weights 2, 4 of 12; domain 1: 1, 1, 2, 3 of 8
+    want = np.cumsum([0, 4, 8, 8 / 7, 8 / 7, 16 / 7, 24 / 7])
+    assert np.allclose(c, want, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_cost_cut_ends_the_runs_at_equal_shares(seed):
+    """``cost_cut``: one more edge (a domain split in two) at the slot whose
+    cost is nearest k/nthr of the total, none where that slot is already an
+    edge; the domains still tile the slots in order, each with its cost; and
+    the runs ``claim_masks`` then cuts end exactly there."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(20, 400))
+    nd = int(rng.choice([2, 4, 8]))
+    nthr = int(rng.integers(2, 5))
+    edges = np.sort(rng.choice(np.arange(1, n), nd - 1, replace=False))
+    dlo = np.concatenate([[0], edges])
+    dhi = np.concatenate([edges, [n]])
+    ccum = np.concatenate([[0.0], np.cumsum(rng.exponential(100.0, n).round() + 1)])
+    lo, hi, work = cost_cut(dlo, dhi, ccum, nthr)
+    assert lo[0] == 0 and hi[-1] == n and (lo[1:] == hi[:-1]).all() and (hi > lo).all()
+    cuts = [int(np.abs(ccum - ccum[-1] * k / nthr).argmin()) for k in range(1, nthr)]
+    assert set(lo[1:]) == set(edges) | {s for s in cuts if 0 < s < n}
+    assert (work == np.rint(ccum[hi] - ccum[lo])).all()
+    own, _ = claim_masks("runs", len(lo), nthr, None, work)
+    for k in range(1, nthr):  # run k - 1 ends at the cut (or a run is empty)
+        ends = {int(hi[d]) for d in range(len(lo)) if (int(own[k - 1]) >> d) & 1}
+        if ends and 0 < cuts[k - 1] < n:
+            assert max(ends) == cuts[k - 1] or (len(set(cuts)) < len(cuts))
 
 
 def test_home_ranges_tile_the_domains():
@@ -593,11 +674,39 @@ def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
             if work is None:  # no step yet whose events all ran on the threads
                 assert eng.repairs > repairs  # (measured: 1 in 300 steps with 8 domains)
                 continue
-            assert len(work) == 4
+            # the four domains, one of them split where the threads' runs end
+            # (``pool.cost_cut``) from the second step on
+            assert len(work) in (4, 5)
             if eng.repairs == repairs:  # one attempt: its counts alone
                 assert work.sum() == eng.step_stats[K.S_CONC] > 0
                 assert work.sum() % TIME_EVERY == 0
             assert (work > 0).sum() >= 2  # events in more than one domain
+    finally:
+        eng.close()
+
+
+def test_the_runs_end_at_equal_shares_of_the_last_steps_cost(sequential):
+    """Under ``"runs"`` the threads' runs end at the slot nearest half the
+    last step's cost (``Engine._pool_slot_cost``, ``pool.slot_costs``): a
+    domain edge there (one domain split in two if need be, ``cost_cut``), and
+    the first thread's run ends at it."""
+    sc = sequential("dish_marble", "late")[0]
+    eng = pool_engine(sc, 4, 2)
+    try:
+        seen = 0
+        for _ in range(STEPS["dish_marble"]):
+            c = eng._pool_slot_cost
+            eng.step()
+            if c is None:  # the first step: the domains' edges, equal shares
+                continue
+            dlo, dhi = eng._pool_last
+            assert 4 <= len(dlo) <= 5
+            s = int(np.abs(c - c[-1] / 2).argmin())
+            assert s in set(int(x) for x in dlo) | {eng.n}
+            own = claim_masks("runs", len(dlo), 2, None, eng._pool_dwork)[0]
+            assert max(int(dhi[d]) for d in range(len(dlo)) if int(own[0]) >> d & 1) == s
+            seen += 1
+        assert seen >= STEPS["dish_marble"] - 2
     finally:
         eng.close()
 
