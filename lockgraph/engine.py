@@ -30,7 +30,7 @@ from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    init_domains, pool_state, restore_start, two_hop_masks, work_split,
-                   cost_cut, slot_costs)
+                   cost_cut, cost_points)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
@@ -407,9 +407,10 @@ class Engine:
         # (``claim_masks``'s work), and this step's domain adjacency (filled
         # by ``init_domains``)
         self._pool_work = None
-        # the cost of slots 0..s-1 in the last pool step's events, s = 0..N
-        # (``pool.slot_costs``), and this step's domains' share of it
-        self._pool_slot_cost = None
+        # the cost of slots 0..s-1 in the last pool step's events at its domains'
+        # edges and where the runs should end (``pool.cost_points``), and this
+        # step's domains' share of it
+        self._pool_cost = None
         self._pool_dwork = None
         self._pool_last = None
         self._pool_adj = np.zeros(0, np.int64)
@@ -1182,11 +1183,11 @@ class Engine:
         if self._pool_split == "work" and cuts is not None and len(cuts[0]) == nd:
             return cuts  # fresh arrays each step, read only
         dlo, dhi = self._domains(nd)
-        c = self._pool_slot_cost
-        if self._pool_claim in ("band", "runs") and c is not None and len(c) == self.n + 1:
+        c = self._pool_cost
+        if self._pool_claim in ("band", "runs") and c is not None:
             # the threads' runs end at equal shares of the cost, inside a domain
             # if need be (that domain split in two), not at the nearest edge
-            dlo, dhi, self._pool_dwork = cost_cut(dlo, dhi, c, self.threads)
+            dlo, dhi, self._pool_dwork = cost_cut(dlo, dhi, c)
         return dlo, dhi
 
     def _pool_count(self):
@@ -1228,7 +1229,7 @@ class Engine:
             # thread more to take from the other's run (README, Benchmarks:
             # "A band cut by cycles")
             self._pool_work = pctl[:nd, PCYC].copy()
-            self._pool_slot_cost = slot_costs(self._pool_work, dlo, dhi, self.cis)
+            self._pool_cost = cost_points(self._pool_work, dlo, dhi, self.cis, self.threads)
         return status
 
     @staticmethod

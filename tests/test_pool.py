@@ -25,7 +25,7 @@ from lockgraph.neighbors import JCOUNT
 from lockgraph.parallel import TIME_EVERY
 from lockgraph.pool import (NPCTL, NTCTL, PCLOCK, PINFL, POWN, POWNER, PVER, REDO_WINDOW, TASK,
                             _answer, _ask, _pick_own, claim_masks, clear_words, cost_cut,
-                            domain_adjacency, domain_of, home_range, pool_state, slot_costs,
+                            cost_points, domain_adjacency, domain_of, home_range, pool_state,
                             two_hop_masks, work_split)
 from lockgraph.restitution import Constant
 from lockgraph.simulation import Simulation
@@ -263,25 +263,22 @@ def test_a_held_pick_waits_for_its_blocker_alone():
     assert _pick_own(dctl, own, 0, dtb, bx, bt, bv) == (1, False)
 
 
-def test_slot_costs_share_each_domains_cycles_by_collisions():
-    """``slot_costs``: slots 0..s-1's cost, each domain's cycles shared over
-    its slots in proportion to their collisions plus one (exact in binary
-    fractions here)."""
-    dlo = np.array([0, 2, 6])
-    dhi = np.array([2, 6, 6])  # the last one empty
-    cis = np.array([1, 3, 0, 0, 1, 2])
-    c = slot_costs(np.array([12, 8, 5]), dlo, dhi, cis)
-    # domain 0: weights 2, 4 of 12; domain 1: 1, 1, 2, 3 of 8
-    want = np.cumsum([0, 4, 8, 8 / 7, 8 / 7, 16 / 7, 24 / 7])
-    assert np.allclose(c, want, rtol=0, atol=1e-12)
+def cost_by_brute_force(work, dlo, dhi, cis):
+    """Slots 0..s-1's cost for every s: each domain's cycles shared over its
+    slots in proportion to their collisions plus one."""
+    w = np.asarray(cis, np.float64) + 1.0
+    per = np.concatenate([np.full(h - l, wk / w[l:h].sum()) for wk, l, h in zip(work, dlo, dhi)
+                          if h > l])
+    return np.concatenate([[0.0], np.cumsum(w * per)])
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_cost_cut_ends_the_runs_at_equal_shares(seed):
-    """``cost_cut``: one more edge (a domain split in two) at the slot whose
-    cost is nearest k/nthr of the total, none where that slot is already an
-    edge; the domains still tile the slots in order, each with its cost; and
-    the runs ``claim_masks`` then cuts end exactly there."""
+def test_the_runs_end_at_equal_shares_of_the_cost(seed):
+    """``cost_points``: the cost at every domain edge and at the slot nearest
+    k/nthr of the total, as summed over every slot; ``cost_cut``: one more
+    edge there (a domain split in two), none where that slot is already an
+    edge; the domains still tile the slots, each with its cost; and the runs
+    ``claim_masks`` then cuts end exactly there."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(20, 400))
     nd = int(rng.choice([2, 4, 8]))
@@ -289,17 +286,26 @@ def test_cost_cut_ends_the_runs_at_equal_shares(seed):
     edges = np.sort(rng.choice(np.arange(1, n), nd - 1, replace=False))
     dlo = np.concatenate([[0], edges])
     dhi = np.concatenate([edges, [n]])
-    ccum = np.concatenate([[0.0], np.cumsum(rng.exponential(100.0, n).round() + 1)])
-    lo, hi, work = cost_cut(dlo, dhi, ccum, nthr)
-    assert lo[0] == 0 and hi[-1] == n and (lo[1:] == hi[:-1]).all() and (hi > lo).all()
+    work = rng.integers(1, 10**6, nd)
+    cis = rng.poisson(2.0, n)
+    ccum = cost_by_brute_force(work, dlo, dhi, cis)
+    points, got = cost_points(work, dlo, dhi, cis, nthr)
     cuts = [int(np.abs(ccum - ccum[-1] * k / nthr).argmin()) for k in range(1, nthr)]
+    assert got == cuts
+    assert set(points) == set(dlo) | {n} | set(cuts)
+    assert np.allclose([points[s] for s in sorted(points)], ccum[sorted(points)], rtol=1e-12)
+    lo, hi, cost = cost_cut(dlo, dhi, (points, got))
+    assert lo[0] == 0 and hi[-1] == n and (lo[1:] == hi[:-1]).all() and (hi > lo).all()
     assert set(lo[1:]) == set(edges) | {s for s in cuts if 0 < s < n}
-    assert (work == np.rint(ccum[hi] - ccum[lo])).all()
-    own, _ = claim_masks("runs", len(lo), nthr, None, work)
-    for k in range(1, nthr):  # run k - 1 ends at the cut (or a run is empty)
-        ends = {int(hi[d]) for d in range(len(lo)) if (int(own[k - 1]) >> d) & 1}
-        if ends and 0 < cuts[k - 1] < n:
-            assert max(ends) == cuts[k - 1] or (len(set(cuts)) < len(cuts))
+    # whole cycles, summed in another order: within one of the slot sums
+    assert (np.abs(cost - (ccum[hi] - ccum[lo])) <= 1.0).all()
+    own, _ = claim_masks("runs", len(lo), nthr, None, cost)
+    for k in range(1, nthr):  # run k - 1 ends at its cut
+        ends = [int(hi[d]) for d in range(len(lo)) if (int(own[k - 1]) >> d) & 1]
+        if ends and len(set(cuts)) == len(cuts):
+            assert max(ends) == cuts[k - 1]
+    # another cut of the slots (the edges not in points): no change
+    assert cost_cut(dlo + (dlo > 0), dhi + (dhi < n), (points, got))[2] is None
 
 
 def test_home_ranges_tile_the_domains():
@@ -687,7 +693,7 @@ def test_the_band_cut_weighs_domains_by_their_cycles(sequential):
 
 def test_the_runs_end_at_equal_shares_of_the_last_steps_cost(sequential):
     """Under ``"runs"`` the threads' runs end at the slot nearest half the
-    last step's cost (``Engine._pool_slot_cost``, ``pool.slot_costs``): a
+    last step's cost (``Engine._pool_cost``, ``pool.cost_points``): a
     domain edge there (one domain split in two if need be, ``cost_cut``), and
     the first thread's run ends at it."""
     sc = sequential("dish_marble", "late")[0]
@@ -695,13 +701,15 @@ def test_the_runs_end_at_equal_shares_of_the_last_steps_cost(sequential):
     try:
         seen = 0
         for _ in range(STEPS["dish_marble"]):
-            c = eng._pool_slot_cost
+            c = eng._pool_cost
             eng.step()
             if c is None:  # the first step: the domains' edges, equal shares
                 continue
             dlo, dhi = eng._pool_last
             assert 4 <= len(dlo) <= 5
-            s = int(np.abs(c - c[-1] / 2).argmin())
+            s = c[1][0]
+            assert abs(c[0][s] - c[0][eng.n] / 2) <= min(abs(c[0][x] - c[0][eng.n] / 2)
+                                                         for x in c[0])
             assert s in set(int(x) for x in dlo) | {eng.n}
             own = claim_masks("runs", len(dlo), 2, None, eng._pool_dwork)[0]
             assert max(int(dhi[d]) for d in range(len(dlo)) if int(own[0]) >> d & 1) == s
