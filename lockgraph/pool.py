@@ -85,10 +85,9 @@ and never takes another's: no claims, no releases, no asking.  After each
 event it looks at the earliest of its own domains (``_pick_own``); an
 event that waits for none but its own domains is ordered by their clocks
 alone (only this thread runs them; another writes them only to hand one
-an event, under the lock) and runs as an interior one (its commit still
-checks, as every event with another domain in its masks does); only an
-event that also waits for another thread's domains publishes its times and
-looks twice.  When every own domain waits, the thread spins a little
+an event, under the lock) and runs as an interior one; only an event that
+also waits for another thread's domains publishes its times, looks twice
+and checks at its commit (below: "Checks by the other threads' domains").  When every own domain waits, the thread spins a little
 (``RUNS_SPINS``) before it yields.  Measured on the bed, paired, against
 ``"band"`` in the same processes: 1-3 % faster, and no repairs in 96 steps
 where "band" had 5 (README, Benchmarks: "Own runs, no claims").
@@ -108,7 +107,7 @@ own checks, a cut by cost"):
 * *A cut by cost.*  The runs end where the last step's cost (each domain's
   cycles shared over its slots by their collisions: ``cost_points``)
   reaches equal shares, inside a domain if need be, which is then split in
-  two (``cost_points``, ``cost_cut``; the domains are then one more than
+  two (``cost_cut``; the domains are then one more than
   ``Engine.pool_domains``).  At the nearest domain edge the two threads'
   cycles differed by up to 20 % on the bed.
 
@@ -694,7 +693,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 # ordered by their clocks alone (lines no other thread writes but
                 # to hand one an event), and the event is interior unless it also
                 # waits for another thread's domains: no published times, no
-                # second look (its commit still checks: ``wall``)
+                # second look, no check at its commit (``wall``)
                 x = _blocker(dctl, dtour_t, dtour_s, ids, w & own, tb, t, ids[i])
                 blocked = x >= 0
                 w &= ~own
@@ -944,7 +943,6 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
     elif claim != "earliest":
         raise ValueError(f"unknown claim {claim!r}")
     return (np.array(own, np.uint64).view(np.int64), np.array(allowed, np.uint64).view(np.int64))
-
 
 
 def cost_points(work, dlo, dhi, cis, nthr):
