@@ -29,8 +29,8 @@ from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
-                   init_domains, pool_state, restore_start, two_hop_masks, work_split,
-                   cost_cut, cost_points)
+                   cost_cut, cost_points, init_domains, pool_state, restore_start,
+                   two_hop_masks, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap

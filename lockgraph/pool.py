@@ -87,7 +87,8 @@ event that waits for none but its own domains is ordered by their clocks
 alone (only this thread runs them; another writes them only to hand one
 an event, under the lock) and runs as an interior one; only an event that
 also waits for another thread's domains publishes its times, looks twice
-and checks at its commit (below: "Checks by the other threads' domains").  When every own domain waits, the thread spins a little
+and checks at its commit (below: "Checks by the other threads'
+domains").  When every own domain waits, the thread spins a little
 (``RUNS_SPINS``) before it yields.  Measured on the bed, paired, against
 ``"band"`` in the same processes: 1-3 % faster, and no repairs in 96 steps
 where "band" had 5 (README, Benchmarks: "Own runs, no claims").
