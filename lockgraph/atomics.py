@@ -64,6 +64,19 @@ def fetch_max(typingctx, arr, i, val):
 
 
 @intrinsic
+def fetch_or(typingctx, arr, i, val):
+    """arr[i] |= val atomically; returns the old value."""
+    _check(arr)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+        return builder.atomic_rmw("or", ptr, v, "seq_cst")
+
+    return arr.dtype(arr, i, val), codegen
+
+
+@intrinsic
 def cas(typingctx, arr, i, expected, new):
     """If arr[i] == expected store new; returns the value seen (== expected on success)."""
     _check(arr)

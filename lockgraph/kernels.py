@@ -52,7 +52,7 @@ from ._jit import kernel
 from .forces import hill_coefficients, hill_kicked
 from .events import (BUCKET_BITS, CYLINDER, FLOOR, NONE, build_inner, build_leaves,
                      build_queue, buckets_of, update_queue, update_queue_pair)
-from .atomics import (cycles, fetch_add, fetch_max, float_bits, load, prefetch_read,
+from .atomics import (cycles, fetch_add, fetch_max, fetch_or, float_bits, load, prefetch_read,
                       prefetch_write, store)
 from .neighbors import JCOUNT, LCOUNT, TCOUNT, XCOUNT, add_pair
 from .predict import (INF, cylinder_time, cylinder_time_by, floor_time, floor_time_by,
@@ -297,22 +297,31 @@ def regions_adjacent(locks, noff, nent, a, b):
 
 
 @kernel(inline=True)
-def expose_pair(noff, nent, xhead, xent, xnext, hops, k, m):
+def expose_pair(noff, nent, xhead, xent, xnext, hops, sdom, k, m):
     """The pool (``pool``): a pair (k, m) outside the masks.  k and m become
     *exposed* (``hops[3]``: written by events the masks do not order) and they
     and every particle that reads them, their candidates, *checked*
-    (``hops[2]``: their events publish their times with a fence and check)."""
-    hops[3, k] = 1
-    hops[3, m] = 1
+    (``hops[2]``: their events publish their times with a fence, check, and
+    wait for the domains in this word besides their masks).  Both words are
+    domain masks, ORed in: the one-hop masks of k and m (their domains
+    included) and what k and m were already exposed to, so a checked event
+    waits for the domains of the events that may now write or read what it
+    reads or writes through the new pair (k's events read m, m's events and
+    its partners' read k)."""
+    x = hop1(hops, sdom, noff, nent, k) | hop1(hops, sdom, noff, nent, m) | \
+        load(hops[3], k) | load(hops[3], m)
+    fetch_or(hops[3], k, x)
+    fetch_or(hops[3], m, x)
+    marked = hops[2]
     for u in range(2):
         s = k if u == 0 else np.int64(m)
-        hops[2, s] = 1
+        fetch_or(marked, s, x)
         for q in range(noff[s], noff[s + 1]):
-            hops[2, nent[q] >> 5] = 1
-        x = xhead[s]
-        while x >= 0:
-            hops[2, xent[x] >> 5] = 1
-            x = xnext[x]
+            fetch_or(marked, nent[q] >> 5, x)
+        z = xhead[s]
+        while z >= 0:
+            fetch_or(marked, xent[z] >> 5, x)
+            z = xnext[z]
 
 
 # grow's test without square roots: a relative margin far above their rounding,
@@ -398,13 +407,16 @@ def grow(k, t, parts, step, tree, nbrs, cfg, st, locks):
                         if hops.shape[1] > 0:
                             # the pool carries on: what the pair exposes is checked
                             # from now on (and its worker settles the other domains)
-                            expose_pair(noff, nent, xhead, xent, xnext, hops, k, m)
+                            expose_pair(noff, nent, xhead, xent, xnext, hops, locks[0], k, m)
                         elif ipar[I_PAPER] == 0:
                             ctr[CTR_BAD] = k
                             return VIOLATION
                     elif hops.shape[1] > 0 and (hops[3, k] != 0 or hops[3, m] != 0):
-                        hops[2, k] = 1  # a new reader of an exposed particle
-                        hops[2, m] = 1
+                        # a new reader of an exposed particle: its events wait
+                        # for what the exposed one's wait for
+                        x = hops[3, k] | hops[3, m]
+                        fetch_or(hops[2], k, x)
+                        fetch_or(hops[2], m, x)
                     added = add_pair(noff, nent, xhead, xent, xnext, ctr, k, m, img)
                     if added < 0:
                         return POOL_OVERFLOW

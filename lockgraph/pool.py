@@ -54,9 +54,14 @@ most of them between particles several hops apart at the step start, so
 wider masks do not help) is let in but *exposes* k and m
 (``kernels.expose_pair``): events ordered by no mask may now write them.
 From then on every event on k, m or a particle that reads them (their
-candidates, and any found later) is *checked*: it waits for every other
-domain, not its masks, publishes its particle times with a fence and checks
-at its commit.  The event that found the pair then waits until every event
+candidates, and any found later) is *checked*: it waits for its masks and
+for the domains its mark names (the one-hop masks of k and m, and of the
+pairs exposed before them that share an end: the two-hop set the new pair
+makes, ``test_pool.py`` against breadth-first search), publishes its
+particle times with a fence and checks at its commit.  (Until 2026-12-06 it
+waited for every domain: on the bed, 5 % of the events, and 0.18-0.19
+blocked picks an event against 0.13-0.14 now; README, Benchmarks: "Checked
+events wait for their marks".)  The event that found the pair then waits until every event
 already in flight elsewhere has committed (``_settle``: each of those reads
 the marks again at its commit, and has published its times before this one
 checks).
@@ -676,9 +681,11 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
                 w |= hop2(hops, sdom, noff, nent, j)
             strict = load(marked, i) != 0 or (j >= 0 and load(marked, j) != 0)
             if strict:
-                # near a pair the masks do not know: wait for every domain (the
-                # stale masks would let disorder through, caught but repaired)
-                w = (np.int64(1) << ndom) - 1
+                # near a pair the masks do not know: wait also for the domains
+                # its marks name (``kernels.expose_pair``), not for every domain
+                w |= load(marked, i)
+                if j >= 0:
+                    w |= load(marked, j)
             w &= ~(np.int64(1) << d)
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)

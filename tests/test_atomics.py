@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from lockgraph.atomics import cas, fetch_add, fetch_max, load, prefetch_read, prefetch_write, store
+from lockgraph.atomics import (cas, fetch_add, fetch_max, fetch_or, load, prefetch_read,
+                               prefetch_write, store)
 
 X86 = platform.machine() in ("x86_64", "AMD64")
 
@@ -30,7 +31,8 @@ def _rmw(a):
     seen = cas(a, 2, 3, 9)  # a[2] is 3: swapped
     miss = cas(a, 3, 0, 11)  # a[3] is 4: left
     store(a, 4, load(a, 0) + 1)
-    return old, seen, miss
+    was = fetch_or(a, 5, 12)  # 0b0101 | 0b1100
+    return old, seen, miss, was
 
 
 def _asm(fn):
@@ -63,10 +65,10 @@ class TestPrefetch:
 
 class TestReadModifyWrite:
     def test_values(self):
-        a = np.array([1, 2, 3, 4, 0], np.int64)
-        old, seen, miss = _rmw(a)
-        assert (old, seen, miss) == (1, 3, 4)
-        assert a.tolist() == [6, 7, 9, 4, 7]
+        a = np.array([1, 2, 3, 4, 0, 5], np.int64)
+        old, seen, miss, was = _rmw(a)
+        assert (old, seen, miss, was) == (1, 3, 4, 5)
+        assert a.tolist() == [6, 7, 9, 4, 7, 13]
 
     @pytest.mark.skipif(not X86, reason="x86-64 instruction names")
     def test_locked_instructions(self):

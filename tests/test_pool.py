@@ -20,8 +20,8 @@ from lockgraph.domains import PeriodicCube
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError
 from lockgraph.physics import Physics
-from lockgraph.kernels import hop1, hop2, regions_adjacent
-from lockgraph.neighbors import JCOUNT
+from lockgraph.kernels import expose_pair, hop1, hop2, regions_adjacent
+from lockgraph.neighbors import JCOUNT, add_pair
 from lockgraph.parallel import TIME_EVERY
 from lockgraph.pool import (NPCTL, NTCTL, PCLOCK, PINFL, POWN, POWNER, PVER, REDO_WINDOW, TASK,
                             _answer, _ask, _pick_own, claim_masks, clear_words, cost_cut,
@@ -589,6 +589,45 @@ def test_hop_masks_match_breadth_first_search(seed):
         same = all(masks_by_bfs(grown, sdom, s) == masks_by_bfs(rows, sdom, s)
                    for s in range(n))
         assert regions_adjacent(locks, noff, nent, a, b) == same, (a, b)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_an_exposed_pairs_marks_cover_the_masks_it_breaks(seed):
+    """Pairs added mid-step outside the masks (``expose_pair``, then the pair
+    joins the extras as in ``grow``), one after another, chains included:
+    afterwards every slot's step-start two-hop mask ORed with its mark holds
+    its two-hop set in the grown graph (BFS), and exactly the slots whose
+    two-hop set grew are marked checked, the pairs' ends exposed.  So a
+    checked event, waiting for its masks and its marks (``pool_worker``),
+    waits for every domain whose events may write what it reads or read what
+    it writes."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 60))
+    noff, nent, rows = random_csr(n, int(rng.integers(0, 2 * n)), rng)
+    dlo, dhi, sdom = random_domains(n, rng)
+    hops = np.zeros((4, n), np.int64)
+    h2 = [hop2(hops, sdom, noff, nent, s) for s in range(n)]
+    xhead = np.full(n, -1, np.int32)
+    xent = np.zeros(4 * n, np.int32)
+    xnext = np.zeros(4 * n, np.int32)
+    ctr = np.zeros(8, np.int64)
+    grown = [list(r) for r in rows]
+    ends = set()
+    for _ in range(int(rng.integers(1, 6))):
+        a, b = (int(x) for x in rng.integers(0, n, 2))
+        if a == b or any(e >> 5 == b for e in grown[a]):
+            continue
+        expose_pair(noff, nent, xhead, xent, xnext, hops, sdom, a, b)
+        assert add_pair(noff, nent, xhead, xent, xnext, ctr, a, b, 13) == 1
+        grown[a].append((b << 5) | 13)
+        grown[b].append((a << 5) | 13)
+        ends |= {a, b}
+    for s in range(n):
+        want = masks_by_bfs(grown, sdom, s)[1]
+        assert want & ~(h2[s] | hops[2, s]) == 0, s
+        near = s in ends or any(e >> 5 in ends for e in grown[s])
+        assert (hops[2, s] != 0) == near, s
+        assert (hops[3, s] != 0) == (s in ends), s
 
 
 def masks_by_bfs(rows, sdom, s):
