@@ -61,10 +61,10 @@ makes, ``test_pool.py`` against breadth-first search), publishes its
 particle times with a fence and checks at its commit.  (Until 2026-12-06 it
 waited for every domain: on the bed, 5 % of the events, and 0.18-0.19
 blocked picks an event against 0.13-0.14 now; README, Benchmarks: "Checked
-events wait for their marks".)  The event that found the pair then waits until every event
-already in flight elsewhere has committed (``_settle``: each of those reads
-the marks again at its commit, and has published its times before this one
-checks).
+events wait for their marks".)  The event that found the pair then waits
+until every event already in flight elsewhere has committed (``_settle``:
+each of those reads the marks again at its commit, and has published its
+times before this one checks).
 
 **Which domain, cut how.**  The domains are the tree's nodes of one depth;
 a free thread claims the free domain with the earliest clock among those
