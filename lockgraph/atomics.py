@@ -37,43 +37,28 @@ def _check(arr):
         raise TypeError("atomics work on 1-D int32 or int64 arrays")
 
 
-@intrinsic
-def fetch_add(typingctx, arr, i, val):
-    """arr[i] += val atomically; returns the old value."""
-    _check(arr)
+def _fetch(op, name, doc):
+    """A read-modify-write intrinsic: LLVM's ``atomicrmw op`` (sequentially
+    consistent) on arr[i] with val; it returns the old value."""
+    def fetch(typingctx, arr, i, val):
+        _check(arr)
 
-    def codegen(context, builder, sig, args):
-        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
-        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
-        return builder.atomic_rmw("add", ptr, v, "seq_cst")
+        def codegen(context, builder, sig, args):
+            ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
+            v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
+            return builder.atomic_rmw(op, ptr, v, "seq_cst")
 
-    return arr.dtype(arr, i, val), codegen
+        return arr.dtype(arr, i, val), codegen
 
-
-@intrinsic
-def fetch_max(typingctx, arr, i, val):
-    """arr[i] = max(arr[i], val) atomically (signed); returns the old value."""
-    _check(arr)
-
-    def codegen(context, builder, sig, args):
-        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
-        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
-        return builder.atomic_rmw("max", ptr, v, "seq_cst")
-
-    return arr.dtype(arr, i, val), codegen
+    fetch.__name__ = name
+    fetch.__doc__ = doc
+    return intrinsic(fetch)
 
 
-@intrinsic
-def fetch_or(typingctx, arr, i, val):
-    """arr[i] |= val atomically; returns the old value."""
-    _check(arr)
-
-    def codegen(context, builder, sig, args):
-        ptr = _item_pointer(context, builder, sig.args[0], args[0], sig.args[1], args[1])
-        v = context.cast(builder, args[2], sig.args[2], sig.args[0].dtype)
-        return builder.atomic_rmw("or", ptr, v, "seq_cst")
-
-    return arr.dtype(arr, i, val), codegen
+fetch_add = _fetch("add", "fetch_add", "arr[i] += val atomically; returns the old value.")
+fetch_max = _fetch("max", "fetch_max",
+                   "arr[i] = max(arr[i], val) atomically (signed); returns the old value.")
+fetch_or = _fetch("or", "fetch_or", "arr[i] |= val atomically; returns the old value.")
 
 
 @intrinsic

@@ -679,13 +679,13 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
             w = hop2(hops, sdom, noff, nent, i)
             if j >= 0:
                 w |= hop2(hops, sdom, noff, nent, j)
-            strict = load(marked, i) != 0 or (j >= 0 and load(marked, j) != 0)
-            if strict:
-                # near a pair the masks do not know: wait also for the domains
-                # its marks name (``kernels.expose_pair``), not for every domain
-                w |= load(marked, i)
-                if j >= 0:
-                    w |= load(marked, j)
+            # near a pair the masks do not know (marked, ``kernels.expose_pair``):
+            # wait also for the domains the marks name, not for every domain
+            mark = load(marked, i)
+            if j >= 0:
+                mark |= load(marked, j)
+            strict = mark != 0
+            w |= mark
             w &= ~(np.int64(1) << d)
             # late: not after an event this domain already ran (equal times
             # included: the check then also sees the order of equal keys)
