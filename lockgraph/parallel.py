@@ -511,6 +511,11 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             _publish(dctl, e, dtour_t[e], dtour_s[e])
             spin_unlock(dctl, e * NDCTL + DLOCK)
         _publish(dctl, d, tt, tsl)
+        if status != OK:
+            # posted while still in flight: a thread that waits for every domain
+            # to be idle (a full journal or log) must not post its status first,
+            # or a violation would be lost and the step resumed, not redone
+            _fail(ctrl, status)
         store(dctl, d * NDCTL + DINFL, 0)
         store(dctl, d * NDCTL + DPROG, load(dctl, d * NDCTL + DPROG) + 1)
         spin_unlock(dctl, myl)
@@ -518,7 +523,6 @@ def worker(d, parts, step, tree, nbrs, evq, jour, cfg, st, locks, lstate, doms, 
             _busy_pair(held, near, loff, ladj, a1, a2, -1)
             spin_unlock(ctrl, G)
         if status != OK:
-            _fail(ctrl, status)
             return status
 
 

@@ -850,10 +850,15 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
         if b != a:
             spin_unlock(dctl, b * NPCTL + PLOCK)
         spin_unlock(dctl, a * NPCTL + PLOCK)
-        store(tctl, me * NTCTL + TFLIGHT, 0)
         if status != OK:
+            # posted while still in flight: a thread that waits for every thread
+            # to be idle (a full journal or log: ``_idle``) must not post its
+            # status first, or a violation would be lost and the step resumed,
+            # not redone
             _fail(ctrl, status)
+            store(tctl, me * NTCTL + TFLIGHT, 0)
             return status
+        store(tctl, me * NTCTL + TFLIGHT, 0)
         if runs:
             cur = -1  # the earliest of its own domains next
         else:
