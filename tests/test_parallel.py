@@ -93,12 +93,15 @@ def run(sc, steps, **opts):
         eng.close()
 
 
-def steps_match(eng, steps, want_hash, want_seq):
-    """Run ``steps`` steps of ``eng`` (then close it): its state and collision
-    sequences must be the sequential run's."""
+def steps_match(eng, steps, want_hash, want_seq, each=None):
+    """Run ``steps`` steps of ``eng`` (then close it), calling ``each(eng)``
+    after every step if given: its state and collision sequences must be the
+    sequential run's."""
     try:
         for _ in range(steps):
             eng.step()
+            if each is not None:
+                each(eng)
         assert eng.state().sha256() == want_hash
         assert Sequences(eng.events()) == want_seq
     finally:

@@ -42,6 +42,29 @@ def pool_engine(sc, domains, threads=2, **opts):
     return eng
 
 
+class OnPool:
+    """``check(eng)`` after every step whose last attempt ran on the pool; each
+    must hold.  A step redone on one thread keeps the pool attempt's masks
+    and domains, but not its candidate lists: the redo's search is another
+    rebuild (``Engine._setup`` counts it, and may build a fresh tree, or
+    re-sort the re-sorted one), so its storage order can differ (CI,
+    2026-12-06: ``dish`` late, one redo in 20 steps)."""
+
+    def __init__(self, check):
+        self.check, self.seq, self.checked, self.failed = check, 0, 0, []
+
+    def __call__(self, eng):
+        seq = eng.repairs - eng.repairs_on_threads  # redone on one thread
+        if seq == self.seq:
+            self.checked += 1
+            if not self.check(eng):
+                self.failed.append(eng.steps_done)
+        self.seq = seq
+
+    def done(self):
+        assert self.failed == [] and self.checked >= 1
+
+
 @pytest.mark.parametrize("domains,threads", [(2, 2), (4, 2), (8, 2), (4, 3)])
 @pytest.mark.parametrize("which", ["early", "late"])
 @pytest.mark.parametrize("name", sorted(SMALL))
@@ -64,11 +87,14 @@ def test_pool_splits_and_claims_equal_sequential(sequential, name, threads, spli
     eng = pool_engine(sc, 4, threads)
     eng.pool_split = split
     eng.pool_claim = claim
-    steps_match(eng, STEPS[name], want_hash, want_seq)
+    each = None
+    if claim == "band" and split == "tree":  # each step's adjacency, by brute force
+        each = OnPool(lambda eng: list(eng._pool_adj) == adjacency_by_brute_force(
+            eng.noff, eng.nent, *eng._pool_last))
+    steps_match(eng, STEPS[name], want_hash, want_seq, each)
     assert (eng._pool_cuts is not None) == (split == "work")  # the work split was used
-    if claim == "band" and split == "tree":  # the last step's adjacency, by brute force
-        dlo, dhi = eng._pool_last
-        assert list(eng._pool_adj) == adjacency_by_brute_force(eng.noff, eng.nent, dlo, dhi)
+    if each is not None:
+        each.done()
 
 
 @pytest.mark.parametrize("masks", ["start", "first_use"])
@@ -81,15 +107,18 @@ def test_pool_masks_at_the_start_or_first_use_equal_sequential(sequential, name,
     sc, want_hash, want_seq = sequential(name, which)
     eng = pool_engine(sc, 4)
     eng.pool_masks = masks
-    steps_match(eng, STEPS[name], want_hash, want_seq)
-    hops = eng._pool_keep["hops"]
-    if masks == "start":
-        sdom = eng._pool_keep["sdom"]
+    def kept(eng):
+        hops, sdom = eng._pool_keep["hops"], eng._pool_keep["sdom"]
         fresh = np.zeros_like(hops)
         noff, nent = eng.noff, eng.nent
         want = [(hop1(fresh, sdom, noff, nent, s), hop2(fresh, sdom, noff, nent, s))
                 for s in range(eng.n)]
-        assert list(zip(hops[0], hops[1])) == want
+        return list(zip(hops[0], hops[1])) == want
+
+    each = OnPool(kept) if masks == "start" else None
+    steps_match(eng, STEPS[name], want_hash, want_seq, each)
+    if each is not None:
+        each.done()
 
 
 def work_split_by_brute_force(cis, nd):
