@@ -107,6 +107,7 @@ def test_pool_masks_at_the_start_or_first_use_equal_sequential(sequential, name,
     sc, want_hash, want_seq = sequential(name, which)
     eng = pool_engine(sc, 4)
     eng.pool_masks = masks
+
     def kept(eng):
         hops, sdom = eng._pool_keep["hops"], eng._pool_keep["sdom"]
         fresh = np.zeros_like(hops)
