@@ -218,15 +218,11 @@ def test_interrupted_campaign_resumes_to_the_same_numbers(smoke, tmp_path):
     assert [k for k in resumed if resumed[k] != full[k]] == []
 
 
-def test_runs_on_a_dask_cluster(smoke, tmp_path, monkeypatch):
+def test_runs_on_a_dask_cluster(smoke, tmp_path):
     """--scheduler: the runs go to a local Dask cluster (its scheduler's
     address), finish there, and give the same numbers."""
     from distributed import LocalCluster
 
-    # the workers are this process's children, not the CLI's: they load the
-    # suite's compiled kernels only when told where (``_jit.child_env``); they
-    # compiled every kernel again before (303 s of the test's 310, 2026-12-07)
-    monkeypatch.setenv("NUMBA_CACHE_DIR", _jit.child_env()["NUMBA_CACHE_DIR"])
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                       dashboard_address=None) as cluster:
         p = lockgraph_report(tmp_path / "rep", "--scenes", "ring", "--no-pictures",
