@@ -5,12 +5,15 @@ import pytest
 
 
 def pytest_sessionstart(session):
-    """Compile numba's kernels before the first test, two halves in two
-    processes at once when none are on disk yet (a clean clone: about 100 s
-    instead of 170 s; a few seconds when they are)."""
+    """Compile numba's kernels before the first test, the sequential,
+    threaded and pool kernels in three processes at once when none are on
+    disk yet (a few seconds when they are).  Why the pool's here too: the
+    first pool test compiled them alone on one core (195-230 s on a clean
+    clone)."""
     from lockgraph.simulation import compile_kernels
 
-    print(f"\nlockgraph kernels compiled or loaded in {compile_kernels():.1f} s", flush=True)
+    print(f"\nlockgraph kernels compiled or loaded in {compile_kernels(pool=True):.1f} s",
+          flush=True)
 
 
 @pytest.fixture(autouse=True, scope="session")

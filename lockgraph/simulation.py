@@ -53,6 +53,19 @@ def _compile_threaded(steps=2):
     eng.close()
 
 
+def _compile_pool():
+    """Schedule "pool"'s kernels (``pool.pool_worker``, the step's first
+    events and masks), in every domain."""
+    st, systems = _tiny()
+    for ph in systems:
+        eng = Engine(st, ph, 0.05, threads=2, schedule="pool")
+        try:
+            for _ in range(2):
+                eng.step()
+        finally:
+            eng.close()
+
+
 def _on_disk(dispatcher):
     """Has numba's on-disk cache a compiled version of this kernel's current source?"""
     try:  # numba internals: any surprise means "no", which costs only time
@@ -62,36 +75,45 @@ def _on_disk(dispatcher):
 
 
 @functools.lru_cache(maxsize=None)
-def compile_kernels(processes=2):
+def compile_kernels(processes=2, pool=False):
     """Compile (or load from numba's on-disk cache) every kernel by running
-    tiny systems in each domain, sequential and threaded.  Returns the seconds
-    it took (later calls return the first call's).
+    tiny systems in each domain, sequential and threaded, and with ``pool``
+    also schedule "pool"'s.  Returns the seconds it took (later calls with
+    the same arguments return the first call's).
 
-    The two biggest kernels, the sequential event loop and the threaded worker,
-    take most of a cold compile (measured: 58 s and 78 s of 167 s).  With
-    ``processes=2`` and no compiled worker on disk, a second Python process
-    compiles the threaded half into numba's cache while this one compiles the
-    sequential half; this process then loads it (or compiles what the helper
-    did not leave, should it fail).
+    Measured cold on the AMD machine of 2026-12-07, one after another in one
+    process: the sequential kernels 191 s, then the threaded ones (the
+    worker, the lock structures) 208 s, then the pool's 230 s.  With
+    ``processes=2`` each half whose biggest kernel (the threaded worker,
+    ``pool.pool_worker``) is not on disk is compiled into numba's cache by a
+    helper process while this one compiles the sequential kernels; this
+    process then loads them (or compiles what a helper did not leave,
+    should it fail).
     """
     from .parallel import worker
+    from .pool import pool_worker
 
     t0 = _time.perf_counter()
-    helper = None
-    if processes > 1 and (os.cpu_count() or 1) > 1 and not _on_disk(worker):
+    helpers = []
+    if processes > 1 and (os.cpu_count() or 1) > 1:
         # this package, wherever it was imported from
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join([root] + [p for p in [env.get("PYTHONPATH")] if p])
-        helper = subprocess.Popen(
-            [sys.executable, "-c", f"from {__name__} import _compile_threaded; _compile_threaded(1)"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+        for fn, args, dispatcher, wanted in (("_compile_threaded", "1", worker, True),
+                                             ("_compile_pool", "", pool_worker, pool)):
+            if wanted and not _on_disk(dispatcher):
+                helpers.append(subprocess.Popen(
+                    [sys.executable, "-c", f"from {__name__} import {fn}; {fn}({args})"],
+                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
     try:
         _compile_sequential()
     finally:
-        if helper is not None:
+        for helper in helpers:
             helper.wait()
     _compile_threaded()
+    if pool:
+        _compile_pool()
     return _time.perf_counter() - t0
 
 
@@ -134,7 +156,7 @@ class Simulation:
             raise InputError("physics", f"must be a lockgraph.Physics, got {type(physics).__name__}")
         self.physics = physics
         physics.domain.check_inside(state.pos, state.radius)
-        self.compile_s = compile_kernels()
+        self.compile_s = compile_kernels(pool=schedule == "pool")
         self._engine = Engine(state, physics, dt, skin=skin, leaf_size=leaf_size,
                               collapse_limit=collapse_limit, copy=copy, threads=threads,
                               lock=lock, scale=scale, policy=policy,

@@ -121,3 +121,17 @@ def test_kernel_cache_saves_do_not_race_across_processes(tmp_path):
     for tag in "abc":
         for k in range(60):
             assert f.load(tag + str(k)) == tag + str(k) * 2000
+
+
+def test_the_sessions_compile_leaves_every_helpers_kernels_on_disk():
+    """``compile_kernels(pool=True)`` (the suites' session start) leaves the
+    threaded worker and the pool's worker in numba's on-disk cache, which is
+    what tells a later process (a test's child, a helper) to load rather
+    than compile them."""
+    from lockgraph.parallel import worker
+    from lockgraph.pool import pool_worker
+    from lockgraph.simulation import _on_disk, compile_kernels
+
+    compile_kernels(pool=True)
+    assert _on_disk(worker)
+    assert _on_disk(pool_worker)
