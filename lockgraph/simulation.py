@@ -84,9 +84,10 @@ def compile_kernels(processes=2, pool=False):
     Measured cold on the AMD machine of 2026-12-07, one after another in one
     process: the sequential kernels 191 s, then the threaded ones (the
     worker, the lock structures) 208 s, then the pool's 230 s.  With
-    ``processes=2`` each half whose biggest kernel (the threaded worker,
-    ``pool.pool_worker``) is not on disk is compiled into numba's cache by a
-    helper process while this one compiles the sequential kernels; this
+    ``processes=2`` the threaded kernels, and with ``pool`` the pool's, are
+    each compiled into numba's cache by a helper process of their own when
+    their biggest kernel (``parallel.worker``, ``pool.pool_worker``) is not
+    on disk, while this process compiles the sequential kernels; this
     process then loads them (or compiles what a helper did not leave,
     should it fail).
     """
