@@ -144,8 +144,10 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     if a work stack was short (or ``ctrl`` ABORT was set while waiting)."""
     n = pos.shape[0]
     if me == nthr - 1:
-        ok = resort(pos, perm, ntop, 0, depth_split, fresh, vslots[me], vids[me], stacks[me],
-                    nsplit, band, keys)
+        # root and depths as int64 values, never literals: numba compiles a
+        # kernel again for each literal argument (~10 s each for resort)
+        ok = resort(pos, perm, ntop, np.int64(0), depth_split, fresh, vslots[me], vids[me],
+                    stacks[me], nsplit, band, keys)
         store(ctl, TOP_DONE, 1 if ok >= 0 else -1)
     top = tops[me]  # zeros: compute_reach takes in each chunk's reaches
     nchunks = CHUNKS * nthr

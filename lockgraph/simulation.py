@@ -82,8 +82,8 @@ def compile_kernels(processes=2, pool=False):
     the same arguments return the first call's).
 
     Measured cold on the AMD machine of 2026-12-07, one after another in one
-    process: the sequential kernels 191 s, then the threaded ones (the
-    worker, the lock structures) 208 s, then the pool's 230 s.  With
+    process: the sequential kernels 47 s, then the threaded ones (the
+    worker, the lock structures) 48 s, then the pool's 52 s.  With
     ``processes=2`` the threaded kernels, and with ``pool`` the pool's, are
     each compiled into numba's cache by a helper process of their own when
     their biggest kernel (``parallel.worker``, ``pool.pool_worker``) is not

@@ -314,8 +314,9 @@ def resort_stealing(me, pos, perm, ntop, root, depth, fresh, slots, ids, stack, 
             q = _take(ctl, k * NLIST + LIST_WORD, r == 0)
             if q < 0:
                 break
-            if resort(pos, perm, ntop, below[k, q], -1, fresh, slots, ids, stack, nsplit, delta,
-                      keys) < 0:
+            # -1 as an int64 value: a literal would compile resort once more
+            if resort(pos, perm, ntop, below[k, q], np.int64(-1), fresh, slots, ids, stack,
+                      nsplit, delta, keys) < 0:
                 return -1
     return 0
 
