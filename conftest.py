@@ -9,7 +9,7 @@ def pytest_sessionstart(session):
     threaded and pool kernels in three processes at once when none are on
     disk yet (a few seconds when they are).  Why the pool's here too: the
     first pool test compiled them alone on one core (195-230 s on a clean
-    clone)."""
+    clone until the event kernels were cut down on 2026-12-07; 52 s since)."""
     from lockgraph.simulation import compile_kernels
 
     print(f"\nlockgraph kernels compiled or loaded in {compile_kernels(pool=True):.1f} s",

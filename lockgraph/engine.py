@@ -31,7 +31,8 @@ from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    cost_cut, cost_points, init_domains, pool_state, restore_start,
                    two_hop_masks, work_split)
-from .parallel import (ABORT, INTERIOR, NCTRL, Workers, cache_aligned, classify_ranges,
+from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
+                       classify_ranges,
                        classify_regions, cycles_per_second, next_task, pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
@@ -443,6 +444,7 @@ class Engine:
                              f"need 1.5*omega*dt < 0.25 (dt < {0.25 / (1.5 * hill.omega):.6g} s)")
         self.balance = 0 if self.threads == 1 else BALANCE if balance is None else int(balance)
         self._pool_keep = {}  # schedule="pool": its per-slot arrays, kept across steps
+        self._scratch = AlignedScratch()  # the step's control words and queues
         self._pool_start = None  # a pool step's step-start values (``_rollback``)
         self._load(state, copy)
         self.totals = np.zeros(K.NSTAT)
@@ -735,7 +737,7 @@ class Engine:
             st[K.S_MAXOV] = max(st[K.S_MAXOV], ov)
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
-        ctl = cache_aligned((8,), np.int64)
+        ctl = self._scratch.get("finish", (8,), np.int64)
         self._pmap(_finish_claimed, [
             (self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
              hill.omega if hill is not None else 0.0, not check_end,
@@ -799,7 +801,7 @@ class Engine:
             band = 2.0 * extra
         # the nodes above the subtrees, then the subtrees, beside the kick, the
         # reaches and the clearing of the per-step arrays (``_first_phase``)
-        ctl = cache_aligned((NFIRST,), np.int64)
+        ctl = self._scratch.get("first", (NFIRST,), np.int64)
         tops = np.zeros((t, 2))
         self.steal_ctl[:] = 0
         ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
@@ -836,8 +838,8 @@ class Engine:
             # the permutation, then each thread's subtrees: the permutation of
             # their slots back to the identity, anchors, bounds; then the nodes
             # above them
-            arrived = cache_aligned((8,), np.int64)[:1]
-            claim = self._claim_word()
+            arrived = self._scratch.get("arrived", (8,), np.int64)[:1]
+            claim = self._claim_word("permute")
             tlast = self.tlast if self.guarded else NO_SLEEP
             res = self._pmap(_permute_and_anchor, [
                 (k, t, claim, arrived, self.workers.ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
@@ -890,11 +892,14 @@ class Engine:
                        self.ncoll, self.ids, self.reach, self.tlast if self.guarded else NO_SLEEP,
                        self.perm, self.scratches[0])
 
-    def _claim_word(self):
-        """A fresh claim counter for the kernels of a claimed phase
-        (``init_domains``, ``_permute_and_anchor``): one word at 0 on a cache line
-        of its own, or empty (fixed shares) when ``balance`` is 0."""
-        return cache_aligned((8,), np.int64)[:1] if self.balance > 0 else np.zeros(0, np.int64)
+    def _claim_word(self, name):
+        """A claim counter at 0 for the kernels of the claimed phase ``name``
+        (``init_domains``, ``_permute_and_anchor``): one word on a cache line
+        of its own (kept from step to step: ``AlignedScratch``), or empty
+        (fixed shares) when ``balance`` is 0."""
+        if self.balance == 0:
+            return np.zeros(0, np.int64)
+        return self._scratch.get("claim " + name, (8,), np.int64)[:1]
 
     def _drift_phase(self):
         ph = self.physics
@@ -922,7 +927,7 @@ class Engine:
                 m = self.threads * max(self.balance, 1)
                 # cut at buckets' first slots: each task builds its buckets' leaves
                 lo = [(self.n * k // m) >> BUCKET_BITS << BUCKET_BITS for k in range(m)] + [self.n]
-                rows = cache_aligned((m, K.NSTAT))
+                rows = self._scratch.get("rows", (m, K.NSTAT))
                 self._claimed(K.first_events, m, lambda i, k: (
                     parts, nbrs, evq, cfg, rows[i], lo[i], lo[i + 1]))
                 st[K.S_MAXOV] = rows[:, K.S_MAXOV].max()
@@ -933,9 +938,9 @@ class Engine:
                 dlo, dhi = self._pool_ranges(nd) if self.schedule == "pool" else self._domains(nd)
                 nd = len(dlo)
                 q = tournament_size(int((dhi - dlo).max()))
-                dtour_t = cache_aligned((nd, 2 * q), np.float64, np.inf)
-                dtour_s = cache_aligned((nd, 2 * q), np.int32, -1)
-                rows = cache_aligned((nd, K.NSTAT))
+                dtour_t = self._scratch.get("dtour_t", (nd, 2 * q), np.float64, np.inf)
+                dtour_s = self._scratch.get("dtour_s", (nd, 2 * q), np.int32, -1)
+                rows = self._scratch.get("rows", (nd, K.NSTAT))
                 # claimed: the pool's domains outnumber the threads, and
                 # ``_pmap`` would deal them out round robin to the pool's
                 # threads beside the caller (ring N = 2e5, 16 domains:
@@ -947,7 +952,7 @@ class Engine:
                     hops, wt, sdom = pst[:3]
                     # a redo puts back these step-start values, not the journal's
                     start = self._pool_keep["start"]
-                    claim = self._claim_word()
+                    claim = self._claim_word("domains")
                     # "band" claims by domain adjacency, worked out with the first events
                     self._pool_adj = adj = np.zeros(nd if self._pool_claim == "band" else 0,
                                                     np.int64)
@@ -958,7 +963,7 @@ class Engine:
                          dlo, dhi, dtour_t, dtour_s, adj, start, masks)
                         for k in range(self.threads)])
                     if masks:  # the two-hop masks once every one-hop mask is there
-                        claim = self._claim_word()
+                        claim = self._claim_word("masks")
                         self._pmap(two_hop_masks, [(k, self.threads, claim, hops, sdom,
                                                     nbrs[0], nbrs[1], dlo, dhi)
                                                    for k in range(self.threads)])
@@ -1208,7 +1213,7 @@ class Engine:
         nd = len(dlo)
         self._pool_last = (dlo, dhi)  # this step's domains, for the tests
         # and the step's row (PCHECKED), and the threads' claim masks
-        pctl = cache_aligned((nd + 1 + self.threads, NPCTL), np.int64)
+        pctl = self._scratch.get("pctl", (nd + 1 + self.threads, NPCTL), np.int64)
         pctl[:, PHIGH] = -1
         work = self._pool_dwork if self._pool_dwork is not None and len(self._pool_dwork) == nd \
             else self._pool_work if self._pool_work is not None and len(self._pool_work) == nd \
@@ -1281,7 +1286,7 @@ class Engine:
         """Call ``run(bundles, stt)`` (the workers on the step's events) until it
         stops for a reason other than a full journal or log (grown, then the
         step resumes); the threads' statistics rows are added to st."""
-        stt = cache_aligned((self.threads, K.NSTAT))
+        stt = self._scratch.get("stt", (self.threads, K.NSTAT))
         wall0 = self.workers.wall_s
         try:
             while True:

@@ -880,7 +880,8 @@ def hold_until_abort(dctl, ctrl):
 def pool_state(n, nd, threads, keep, tracked=0):
     """The per-slot arrays of a pool step, ``(hops, wt, sdom)`` (filled by
     ``init_domain``), with the threads' rows of seen queue roots, and
-    ``grow``'s view ``(sdom, -, -, hops)``.  The per-slot arrays live in the
+    ``grow``'s view ``(sdom, -, -, hops)``.  The per-slot arrays (and the
+    rows of seen roots, zeroed here) live in the
     dict ``keep`` from one step to the next (fresh ones each step cost page
     faults: ring N = 2e5, 1.96-2.34 ms a step with its 10 MB new); so do the
     step-start values ``keep["start"] = (vel (n, 3), ncoll (n,), tlast
@@ -893,9 +894,13 @@ def pool_state(n, nd, threads, keep, tracked=0):
     sdom, wt, hops = keep["sdom"], keep["wt"], keep["hops"]
     locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
     width = -(-nd // 8) * 8  # whole cache lines: a row is one thread's
-    seen = (cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64),
-            cache_aligned((threads, width)), cache_aligned((threads, width), np.int64),
-            cache_aligned((threads, width), np.int64), cache_aligned((threads, width), np.int64))
+    if keep.get("seen_shape") != (threads, width):
+        keep.update(seen_shape=(threads, width), seen=tuple(
+            cache_aligned((threads, width), np.float64 if k == 2 else np.int64)
+            for k in range(6)))
+    seen = keep["seen"]
+    for a in seen:
+        a.fill(0)
     return (hops, wt, sdom, seen), locks
 
 
