@@ -32,8 +32,8 @@ from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim
                    cost_cut, cost_points, init_domains, pool_state, restore_start,
                    two_hop_masks, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
-                       classify_ranges,
-                       classify_regions, cycles_per_second, next_task, pause_spin)
+                       classify_ranges, classify_regions, cycles_per_second, next_task,
+                       pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import BUCKET_BITS, tournament_size
