@@ -86,7 +86,7 @@ def build(out, mode="quick", scenes=P.SCENES, scheduler=None, cache_dir=None, st
 
         say = stream or sys.stderr
         print("compiling lockgraph's numba kernels (the first time after an install takes "
-              "a few minutes; cached on disk after)", file=say, flush=True)
+              "a minute or two; cached on disk after)", file=say, flush=True)
         print(f"  {compile_kernels():.1f} s", file=say, flush=True)
     results = run_campaign(runs, cache, scheduler, stream)
     page = Page(out)
