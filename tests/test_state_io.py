@@ -135,3 +135,23 @@ def test_the_sessions_compile_leaves_every_helpers_kernels_on_disk():
     compile_kernels(pool=True)
     assert _on_disk(worker)
     assert _on_disk(pool_worker)
+
+
+def test_compile_kernels_does_each_part_once_per_process(monkeypatch):
+    """A part compiled or loaded once in this process (the session start's
+    sequential, threaded and pool kernels) is not done again, whatever the
+    arguments of a later call: a pool ``Simulation`` after a default one
+    loaded every kernel a second time."""
+    from lockgraph import simulation
+
+    simulation.compile_kernels(pool=True)
+
+    def again():
+        raise AssertionError("a part was compiled or loaded again")
+
+    for name in ("_compile_sequential", "_compile_threaded", "_compile_pool"):
+        monkeypatch.setattr(simulation, name, again)
+    base = simulation.compile_kernels()
+    both = simulation.compile_kernels(pool=True)
+    assert base == simulation._COMPILED["base"]
+    assert both == base + simulation._COMPILED["pool"]
