@@ -29,7 +29,7 @@ from ._jit import kernel
 from . import locks as L
 from .atomics import fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
-                   cost_cut, cost_points, init_domains, pool_state, restore_start,
+                   cost_cut, cost_points, init_domains, pool_start, pool_state, restore_start,
                    two_hop_masks, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
                        classify_ranges, classify_regions, cycles_per_second, next_task,
@@ -43,11 +43,13 @@ from .restitution import CollapseGuard, VelocityGuard
 from .schedule import EventSchedule
 from .state import State
 from .tree import (END, NLIST, NTOP, SELF_IMAGE, START, bound_node, count_nodes, identity,
-                   node_bounds, pair_search_claimed, permute_mat3, permute_vec, resort,
+                   node_bounds, pair_search_claimed, permute_mat3, permute_rows, permute_vec, resort,
                    resort_stealing, search_frontier, skeleton, subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 NO_SLEEP = np.zeros(0)  # _finish's sleep states without sleeping grains (read only)
+# ``_permute_share``'s step-start values when the step is not a pool step (read only)
+NO_START = (np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0))
 POLICIES = ("exact", "paper")
 SCHEDULES = ("parallel", "auto", "pool")
 # tasks per thread in the claimed phases (Engine.balance, _claimed)
@@ -180,13 +182,22 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
 
 
 @kernel
-def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf):
+def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf,
+                   anc, start):
     """Thread ``me`` of ``nthr``'s share of the storage permutation
     (``Engine._permute``), an array a task (``PERMUTED``, and ``tlast`` if it
     is per particle; ``parallel.next_task``).  ``buf`` (N,) float64 is this
-    thread's gather buffer, seen as each array's type."""
+    thread's gather buffer, seen as each array's type.  The positions are
+    gathered through ``anc`` (N, 3), which is left holding them: the step's
+    anchors.  ``start = (vel0, ncoll0, tlast0)``, a pool step's step-start
+    values (``pool.pool_start``), or empty: when full, the velocities,
+    collision counts and guard clocks are gathered through them, which
+    leaves the copy a repair puts back (``pool.restore_start``) at no cost
+    (ring N = 2e5: the copy apart cost 0.3-0.5 ms of a 29 ms step)."""
     n = perm.shape[0]
     ntasks = 8 if tlast.shape[0] == n else 7
+    vel0, ncoll0, tlast0 = start
+    keep = ncoll0.shape[0] == n
     r = 0
     while True:
         q = next_task(claim, me, nthr, r)
@@ -196,34 +207,44 @@ def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlas
         # the largest first and the smallest (4 bytes) last, so that the
         # threads' last tasks end close together
         if q == 0:
-            permute_mat3(pos, perm, buf)
+            permute_rows(pos, perm, anc)
         elif q == 1:
-            permute_mat3(vel, perm, buf)
+            if keep:
+                permute_rows(vel, perm, vel0)
+            else:
+                permute_mat3(vel, perm, buf)
         elif q == 2:
             permute_vec(rad, perm, buf)
         elif q == 3:
             permute_vec(mass, perm, buf)
         elif q == 4:
-            permute_vec(ncoll, perm, buf.view(np.int64))
+            if keep:
+                permute_vec(ncoll, perm, ncoll0)
+            else:
+                permute_vec(ncoll, perm, buf.view(np.int64))
         elif q == 5:
             permute_vec(reach, perm, buf)
         elif q == ntasks - 1:
             permute_vec(ids, perm, buf.view(np.int32)[:n])
+        elif keep and tlast0.shape[0] == n:
+            permute_vec(tlast, perm, tlast0)
         else:
             permute_vec(tlast, perm, buf)
 
 
 @kernel
 def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, ncoll, ids, reach,
-                        tlast, perm, buf, anc, ntop, subroots, nbox, nreach, order):
+                        tlast, perm, buf, anc, ntop, subroots, nbox, nreach, order, start):
     """Thread ``me`` of ``nthr``: its share of the storage permutation
-    (``_permute_share``); then, once every thread is done with it (``arrived``:
+    (``_permute_share``, which leaves the anchors, the step-start positions,
+    in ``anc``); then, once every thread is done with it (``arrived``:
     one word, 0 at the start), for its subtrees (me, me + nthr, ...) the
-    permutation of their slots back to the identity, the anchors (step-start
-    positions) of their particles and the bounds of their nodes.  One call,
+    permutation of their slots back to the identity and the bounds of their
+    nodes.  One call,
     not a phase each: a phase's hand-over to the pool thread and back costs
     0.1-0.2 ms.  Returns 0, or -1 if ``ctrl`` ABORT was set while waiting."""
-    _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf)
+    _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf,
+                   anc, start)
     fetch_add(arrived, 0, 1)
     spins = 0
     while load(arrived, 0) < nthr:
@@ -235,7 +256,6 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
         lo = ntop[nd, START]
         hi = ntop[nd, END]
         identity(perm[lo:hi], lo)
-        K.copy_rows(anc[lo:hi], pos[lo:hi])
         subtree_bounds(anc, reach, ntop, nd, nbox, nreach, order[k])
     return 0
 
@@ -830,9 +850,8 @@ class Engine:
             self.par[K.P_RMAX] = self.top[0]
         nnodes = self.nnodes
         if self.threads == 1:
-            self._permute()
+            self._permute()  # and the anchors
             identity(self.perm, 0)
-            K.copy_rows(self.anc, self.pos)
             node_bounds(self.anc, self.reach, self.ntop, nnodes, self.nbox, self.nreach)
         else:
             # the permutation, then each thread's subtrees: the permutation of
@@ -841,10 +860,13 @@ class Engine:
             arrived = self._scratch.get("arrived", (8,), np.int64)[:1]
             claim = self._claim_word("permute")
             tlast = self.tlast if self.guarded else NO_SLEEP
+            # a pool step's start values, gathered by the permutation itself
+            start = (pool_start(n, self._pool_keep, len(self.tlast))
+                     if self.schedule == "pool" else NO_START)
             res = self._pmap(_permute_and_anchor, [
                 (k, t, claim, arrived, self.workers.ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
                  self.ids, self.reach, tlast, self.perm, self.scratches[k], self.anc, self.ntop,
-                 self.subroot_arr, self.nbox, self.nreach, self.order) for k in range(t)])
+                 self.subroot_arr, self.nbox, self.nreach, self.order, start) for k in range(t)])
             assert min(res) == 0  # ABORT is set only by a raise, which map raises
             for nd in reversed(self.top_nodes):  # pre-order reversed: children first
                 bound_node(self.anc, self.reach, self.ntop, nd, self.nbox, self.nreach)
@@ -890,7 +912,7 @@ class Engine:
         past the ring's 200-byte target."""
         _permute_share(0, 1, np.zeros(0, np.int64), self.pos, self.vel, self.rad, self.mass,
                        self.ncoll, self.ids, self.reach, self.tlast if self.guarded else NO_SLEEP,
-                       self.perm, self.scratches[0])
+                       self.perm, self.scratches[0], self.anc, NO_START)
 
     def _claim_word(self, name):
         """A claim counter at 0 for the kernels of the claimed phase ``name``
@@ -960,7 +982,7 @@ class Engine:
                         self._pool_masks == "auto" and self.last_events > self.n)
                     self._pmap(init_domains, [
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s, adj, start, masks)
+                         dlo, dhi, dtour_t, dtour_s, adj, masks)
                         for k in range(self.threads)])
                     if masks:  # the two-hop masks once every one-hop mask is there
                         claim = self._claim_word("masks")

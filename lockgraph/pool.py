@@ -32,7 +32,7 @@ commit that no particle it wrote or read (i, j and their candidates, the
 pairs found during the event included) carries a later time: any event that
 read or wrote what this one writes, or wrote what it read, wrote one of those
 particles.  A later time is a violation: the step is redone (a repair, from
-the step-start values the pool saved: ``save_start``; not from the undo
+the step-start values the pool saved: ``pool_start``; not from the undo
 journal, which two threads writing one particle at once can leave wrong), on
 the threads with the narrow interior window ``REDO_WINDOW`` and, if that
 attempt finds a violation too, on one thread (``Engine.pool_redo``), so the
@@ -195,43 +195,27 @@ NTCTL = 16
 def clear_words(d, sdom, wt, hops, lo, hi):
     """The pool's words of domain d's slots lo..hi-1 at the step start: the
     domain, no event time, masks not yet worked out (``kernels.hop1``,
-    ``hop2``), unchecked, unexposed."""
-    for s in range(lo, hi):
-        sdom[s] = d
-        wt[s] = -1
-        for r in range(4):
-            hops[r, s] = 0
+    ``hop2``), unchecked, unexposed.  Array by array, as slices: one loop over
+    the slots writing all six took 3.4 times as long (N = 2e5: 0.34 against
+    0.10 ms)."""
+    sdom[lo:hi] = d
+    wt[lo:hi] = -1
+    for r in range(4):
+        hops[r, lo:hi] = 0
 
 
 @kernel
-def save_start(parts, start, lo, hi):
-    """Slots lo..hi-1's velocity, collision count and (when tracked) last
-    collision time at the step start into ``start = (vel, ncoll, tlast)``
-    (``pool_state``): what ``restore_start`` puts back when the step is redone."""
-    vel, ncoll, tlast = parts[1], parts[5], parts[6]
-    vel0, ncoll0, tlast0 = start
-    for s in range(lo, hi):
-        vel0[s, 0] = vel[s, 0]
-        vel0[s, 1] = vel[s, 1]
-        vel0[s, 2] = vel[s, 2]
-        ncoll0[s] = ncoll[s]
-    if tlast.shape[0] > 0:
-        for s in range(lo, hi):
-            tlast0[s] = tlast[s]
-
-
-@kernel
-def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s, start):
-    """Domain d at the step start: its slots' pool words (``clear_words``) and
-    step-start values (``save_start``), then their first events and the
-    domain's queue (``kernels.init_range``).
+def init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s):
+    """Domain d at the step start: its slots' pool words (``clear_words``),
+    then their first events and the domain's queue (``kernels.init_range``).
+    (Its step-start values are already saved: the permutation gathers them,
+    ``pool_start``.)
     The masks are filled here (``init_domains``, ``two_hop_masks``) or at
     first use (``Engine.pool_masks``): most slots of a sparse scene never
     need them (ring N = 2e5: 2,226 events a step; masks for every slot,
     worked out before the events, cost 1.0-2.0 ms of a 42 ms step), and
     every slot of a dense one does."""
     clear_words(d, sdom, wt, hops, lo, hi)
-    save_start(parts, start, lo, hi)
     init_range(parts, nbrs, evq, cfg, st, lo, hi, tour_t, tour_s)
 
 
@@ -287,7 +271,7 @@ def two_hop_masks(me, nthr, claim, hops, sdom, noff, nent, dlo, dhi):
 
 @kernel
 def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, dlo, dhi, dtour_t,
-                 dtour_s, adj, start, masks):
+                 dtour_s, adj, masks):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
     (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
     (``parallel.next_task``), and of the domains' ``domain_adjacency`` when
@@ -303,7 +287,7 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
         if d >= nd:
             return 0
         init_domain(d, sdom, wt, hops, parts, nbrs, evq, cfg, rows[d], dlo[d], dhi[d],
-                    dtour_t[d], dtour_s[d], start)
+                    dtour_t[d], dtour_s[d])
         if masks or adj.shape[0] > 0:
             m = domain_adjacency(nbrs[0], nbrs[1], dhi, d, dlo[d], dhi[d],
                                  hops[0] if masks else hops[0][:0])
@@ -877,20 +861,28 @@ def hold_until_abort(dctl, ctrl):
     return OK
 
 
-def pool_state(n, nd, threads, keep, tracked=0):
-    """The per-slot arrays of a pool step, ``(hops, wt, sdom)`` (filled by
-    ``init_domain``), with the threads' rows of seen queue roots, and
-    ``grow``'s view ``(sdom, -, -, hops)``.  The per-slot arrays (and the
-    rows of seen roots, zeroed here) live in the
-    dict ``keep`` from one step to the next (fresh ones each step cost page
-    faults: ring N = 2e5, 1.96-2.34 ms a step with its 10 MB new); so do the
-    step-start values ``keep["start"] = (vel (n, 3), ncoll (n,), tlast
-    (tracked,))`` (``save_start``, ``restore_start``)."""
+def pool_start(n, keep, tracked=0):
+    """The step-start values of a pool step, ``(vel (n, 3), ncoll (n,),
+    tlast (tracked,))``, what ``restore_start`` puts back when the step is
+    redone: filled by the storage permutation (``engine._permute_share``),
+    which gathers those arrays through them.  They and the per-slot arrays
+    of ``pool_state`` live in the dict ``keep`` from one step to the next
+    (fresh ones each step cost page faults: ring N = 2e5, 1.96-2.34 ms a
+    step with its 10 MB new)."""
     if keep.get("n") != n or len(keep["start"][2]) != tracked:
         # sdom int32: also ``grow``'s lock_of, so one array serves both
         keep.update(n=n, sdom=np.empty(n, np.int32), hops=np.empty((4, n), np.int64),
                     wt=np.empty(n, np.int64),
                     start=(np.empty((n, 3)), np.empty(n, np.int64), np.empty(tracked)))
+    return keep["start"]
+
+
+def pool_state(n, nd, threads, keep, tracked=0):
+    """The per-slot arrays of a pool step, ``(hops, wt, sdom)`` (filled by
+    ``init_domain``), with the threads' rows of seen queue roots, and
+    ``grow``'s view ``(sdom, -, -, hops)``, kept in ``keep`` (``pool_start``;
+    the rows of seen roots are zeroed here)."""
+    pool_start(n, keep, tracked)
     sdom, wt, hops = keep["sdom"], keep["wt"], keep["hops"]
     locks = (sdom, np.zeros(1, np.int64), np.zeros(0, np.int32), hops)
     width = -(-nd // 8) * 8  # whole cache lines: a row is one thread's
@@ -905,7 +897,7 @@ def pool_state(n, nd, threads, keep, tracked=0):
 
 
 def restore_start(vel, ncoll, tlast, start):
-    """Put back the step-start values ``save_start`` kept (a pool step that is
+    """Put back the step-start values ``pool_start`` kept (a pool step that is
     redone).  Not the undo journal (``kernels.journal``): in a pool step with
     events out of order two threads may write one particle at once, and then
     a particle's journal entry may hold the other thread's half-done write, or

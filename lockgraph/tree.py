@@ -924,6 +924,24 @@ def permute_vec(a, perm, buf):
 
 
 @kernel
+def permute_rows(a, perm, buf):
+    """In place a[k, :] = a_old[perm[k], :] for an (N, 3) array through ``buf``
+    (N, 3), which then holds the permuted rows too (the anchors, or a pool
+    step's start velocities: a copy the caller needs anyway).  One gather
+    over whole rows: ``permute_mat3`` reads each row three times."""
+    n = perm.shape[0]
+    for k in range(n):
+        p = perm[k]
+        buf[k, 0] = a[p, 0]
+        buf[k, 1] = a[p, 1]
+        buf[k, 2] = a[p, 2]
+    for k in range(n):
+        a[k, 0] = buf[k, 0]
+        a[k, 1] = buf[k, 1]
+        a[k, 2] = buf[k, 2]
+
+
+@kernel
 def permute_mat3(a, perm, buf):
     """In place a[k, :] = a_old[perm[k], :] for an (N,3) array, a column at a
     time through ``buf`` (N entries): a third of the memory a row buffer needs."""

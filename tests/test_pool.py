@@ -408,6 +408,30 @@ def test_a_redo_puts_back_the_step_start_not_the_journal(sequential):
     assert eng.repairs > 0 and len(spoiled) == eng.repairs and min(spoiled) > 0
 
 
+@pytest.mark.parametrize("name", ["ring", "dish_marble"])
+def test_the_permutation_leaves_the_step_start_values(sequential, name):
+    """A pool step's step-start values (what a redo puts back:
+    ``pool.pool_start``) and the anchors are left by the storage permutation,
+    which gathers through them (``engine._permute_share``), not copied
+    apart: at the start of every pool attempt's events they equal the
+    velocities, collision counts, guard clocks and positions in the step's
+    slot order (the marble dish's guard clocks are per particle)."""
+    sc, want_hash, want_seq = sequential(name, "late")
+    eng = pool_engine(sc, 8)
+    real = eng._events_pool
+    seen = []
+
+    def look_then_run(*args):
+        vel0, ncoll0, tlast0 = eng._pool_keep["start"]
+        seen.append((np.array_equal(vel0, eng.vel), np.array_equal(ncoll0, eng.ncoll),
+                     np.array_equal(tlast0, eng.tlast), np.array_equal(eng.anc, eng.pos)))
+        return real(*args)
+    eng._events_pool = look_then_run
+    steps_match(eng, STEPS[name], want_hash, want_seq)
+    assert len(seen) >= STEPS[name] and all(all(s) for s in seen)
+    assert len(eng.tlast) == (eng.n if name == "dish_marble" else 0)
+
+
 def violating_first_attempts(eng, steps):
     """Make the first pool attempt of each step in ``steps`` (engine step
     counts) report a violation after all its events ran; returns the list of
