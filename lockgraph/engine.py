@@ -43,8 +43,8 @@ from .restitution import CollapseGuard, VelocityGuard
 from .schedule import EventSchedule
 from .state import State
 from .tree import (END, NLIST, NTOP, SELF_IMAGE, START, bound_node, count_nodes, identity,
-                   node_bounds, pair_search_claimed, permute_mat3, permute_rows, permute_vec, resort,
-                   resort_stealing, search_frontier, skeleton, subtree_bounds)
+                   node_bounds, pair_search_claimed, permute_mat3, permute_rows, permute_vec,
+                   resort, resort_stealing, search_frontier, skeleton, subtree_bounds)
 
 LOCKS = ("none", "grid", "grid3d", "graph")
 NO_SLEEP = np.zeros(0)  # _finish's sleep states without sleeping grains (read only)
@@ -192,8 +192,10 @@ def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlas
     anchors.  ``start = (vel0, ncoll0, tlast0)``, a pool step's step-start
     values (``pool.pool_start``), or empty: when full, the velocities,
     collision counts and guard clocks are gathered through them, which
-    leaves the copy a repair puts back (``pool.restore_start``) at no cost
-    (ring N = 2e5: the copy apart cost 0.3-0.5 ms of a 29 ms step)."""
+    leaves the copy a repair puts back (``pool.restore_start``) without a
+    pass of its own (until 2026-12-07 ``save_start`` copied them with each
+    domain's first events; README, Benchmarks: "The pool's step start by
+    slices")."""
     n = perm.shape[0]
     ntasks = 8 if tlast.shape[0] == n else 7
     vel0, ncoll0, tlast0 = start

@@ -699,7 +699,8 @@ def _first_events(parts, nbrs, evq, cfg, st, lo, hi):
     evt, evp, evc, tour_t, tour_s, hidden = evq
     par, ipar, img_pos, img_vel, img_all, parb = cfg
     t_end = par[P_DT]
-    # as slices, an array at a time: a loop writing the three is several times slower
+    # as slices, an array at a time (as ``pool.clear_words``, where one loop
+    # writing six arrays took 3.4 times as long)
     evt[lo:hi] = INF
     evp[lo:hi] = NONE
     evc[lo:hi] = 0
