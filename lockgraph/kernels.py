@@ -808,14 +808,6 @@ def process_event(i, t, parts, step, tree, nbrs, evq, jour, cfg, st, locks):
 
 
 @kernel
-def copy_rows(dst, src):
-    for i in range(src.shape[0]):
-        dst[i, 0] = src[i, 0]
-        dst[i, 1] = src[i, 1]
-        dst[i, 2] = src[i, 2]
-
-
-@kernel
 def run_events(parts, step, tree, nbrs, evq, jour, cfg, st, locks, trace, max_events):
     """Process events in (time, id) order until the step end or a status.
 
