@@ -195,7 +195,7 @@ def skeleton(n, leaf_size, ntop, stack):
 
 
 @kernel
-def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, delta, keys):
+def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, delta, keys, slab):
     """Put the particles of the subtree under ``root`` into tree order.
 
     Top-down over the subtree, down to ``max_depth`` levels below ``root``
@@ -203,7 +203,10 @@ def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, d
     its particles' box and a median selection (a new tree); otherwise each
     node keeps last step's axis and split ``nsplit[node]`` and only the
     particles that crossed it are moved (``rebuild_node``); ``nsplit`` is
-    updated.
+    updated.  ``slab`` (>= 0): a fresh node fewer than ``slab`` levels below
+    the tree's root (node 0) is split along the root's axis, not its own
+    longest, so the nodes ``slab`` levels down are slabs stacked along the
+    scene's longest axis (the pool's domains: ``Engine._slab_levels``).
     Subtrees of different nodes are disjoint slot ranges: threads may re-sort
     them at the same time.  Returns -1 if ``stack`` was short.
     """
@@ -241,6 +244,15 @@ def resort(pos, perm, ntop, root, max_depth, fresh, slots, ids, stack, nsplit, d
                 ext = hi1 - lo1
             if hi2 - lo2 > ext:
                 axis = 2
+            if nd != 0 and slab > 1:
+                # within the top ``slab`` levels: the root's axis
+                level = 1
+                up = ntop[nd, PARENT]
+                while up > 0 and level < slab:
+                    level += 1
+                    up = ntop[up, PARENT]
+                if level < slab:
+                    axis = ntop[0, AXIS]
             ntop[nd, AXIS] = axis
             nsplit[nd] = _split_keyed(pos, perm, axis, s, e, ntop[left, END], keys)
         else:
@@ -285,7 +297,7 @@ def _take(ctl, at, front):
 
 @kernel
 def resort_stealing(me, pos, perm, ntop, root, depth, fresh, slots, ids, stack, nsplit, delta,
-                    keys, below, nbelow, ctl):
+                    keys, below, nbelow, ctl, slab):
     """``resort`` of subtree ``me`` (node ``root``), shared out while it runs.
 
     The nodes of the subtree's top ``depth`` levels are re-sorted here; then
@@ -300,7 +312,8 @@ def resort_stealing(me, pos, perm, ntop, root, depth, fresh, slots, ids, stack, 
     call's own.  Returns 0, or -1 if ``stack`` was short.
     """
     at = me * NLIST
-    if resort(pos, perm, ntop, root, depth, fresh, slots, ids, stack, nsplit, delta, keys) < 0:
+    if resort(pos, perm, ntop, root, depth, fresh, slots, ids, stack, nsplit, delta, keys,
+              slab) < 0:
         store(ctl, at + LIST_OPEN, -1)
         return -1
     store(ctl, at + LIST_WORD, nbelow[me] << 32)
@@ -316,7 +329,7 @@ def resort_stealing(me, pos, perm, ntop, root, depth, fresh, slots, ids, stack, 
                 break
             # -1 as an int64 value: a literal would compile resort once more
             if resort(pos, perm, ntop, below[k, q], np.int64(-1), fresh, slots, ids, stack,
-                      nsplit, delta, keys) < 0:
+                      nsplit, delta, keys, slab) < 0:
                 return -1
     return 0
 
@@ -333,7 +346,7 @@ def build(pos, leaf_size, perm, ntop, stack):
         return -1
     work = np.zeros(2 * stack.shape[0], np.int64)
     if resort(pos, perm, ntop, 0, -1, True, np.zeros(1, np.int64), np.zeros(1, perm.dtype),
-              work, np.zeros(nn), 0.0, np.zeros(pos.shape[0])) < 0:
+              work, np.zeros(nn), 0.0, np.zeros(pos.shape[0]), 0) < 0:
         return -1
     return nn
 

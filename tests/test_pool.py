@@ -74,6 +74,51 @@ def test_pool_equals_sequential(sequential, name, which, domains, threads):
     steps_match(pool_engine(sc, domains, threads), STEPS[name], want_hash, want_seq)
 
 
+@pytest.mark.parametrize("which", ["early", "late"])
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_slab_domains_equal_sequential(sequential, name, which, monkeypatch):
+    """Slab domains (``Engine._slab_levels``, forced on every scene by an
+    aspect threshold of 1): every fresh tree's levels above the 8 domains
+    split along the root's axis, and the result is the sequential one."""
+    import lockgraph.engine as E
+    from lockgraph.tree import AXIS, LEFT, PARENT
+    monkeypatch.setattr(E, "SLAB_ASPECT", 1.0)
+    sc, want_hash, want_seq = sequential(name, which)
+    eng = pool_engine(sc, 8)
+
+    def slabs(eng):
+        depth = {0: 0}
+        for nd in range(1, eng.nnodes):  # parents come first in node order
+            depth[nd] = depth[int(eng.ntop[nd, PARENT])] + 1
+        top = [nd for nd in range(1, eng.nnodes) if depth[nd] < 3 and eng.ntop[nd, LEFT] >= 0]
+        return len(top) == 6 and all(eng.ntop[nd, AXIS] == eng.ntop[0, AXIS] for nd in top)
+    each = OnPool(slabs)
+    steps_match(eng, STEPS[name], want_hash, want_seq, each)
+    assert eng._slab_levels(False) == 3
+    each.done()
+
+
+def test_slab_domains_only_in_a_long_scene_on_the_pool(sequential, monkeypatch):
+    """The pool's domains are slabs in a scene whose longest side is at least
+    ``SLAB_ASPECT`` times its second (the small marble dish early: a column
+    2.8 times as tall as wide), not in the ring's square sheet early (1.0),
+    and never on one thread or without the pool."""
+    import lockgraph.engine as E
+    marble, _, _ = sequential("dish_marble", "early")
+    ring, _, _ = sequential("ring", "early")
+    for sc in (marble, ring):
+        ext = np.sort(np.ptp(sc.state.pos, axis=0))
+        long = ext[2] >= E.SLAB_ASPECT * ext[1]
+        assert long == (sc is marble)
+        assert pool_engine(sc, 4)._slab_levels(True) == (2 if long else 0)
+        assert pool_engine(sc, 16)._slab_levels(True) == (4 if long else 0)
+        for other in (Engine(sc.state, sc.physics, sc.dt, threads=1),
+                      Engine(sc.state, sc.physics, sc.dt, threads=2)):
+            assert other._slab_levels(True) == 0
+    monkeypatch.setattr(E, "SLAB_ASPECT", 1.0)
+    assert pool_engine(ring, 4)._slab_levels(True) == 2
+
+
 @pytest.mark.parametrize("split,claim", [("work", "home"), ("work", "earliest"),
                                          ("tree", "home"), ("tree", "earliest"),
                                          ("tree", "band"), ("work", "band"),

@@ -271,7 +271,7 @@ def _fresh_tree(pos, leaf=8):
     perm = np.arange(n, dtype=np.int32)
     nsplit = np.full(nn, np.nan)
     assert resort(pos, perm, ntop, 0, -1, True, np.zeros(1, np.int64), np.zeros(1, np.int32),
-                  np.zeros(256, np.int64), nsplit, 0.0, np.zeros(n)) == 0
+                  np.zeros(256, np.int64), nsplit, 0.0, np.zeros(n), 0) == 0
     assert _kd_ordered(pos, perm, ntop, nn)
     return perm, ntop, nn, nsplit
 
@@ -291,7 +291,7 @@ def _step_later(seed, n=500, noise=0.05, wrapped=0):
 def _resort(pos, perm, ntop, nsplit, band, cap=4096):
     from lockgraph.tree import resort
     assert resort(pos, perm, ntop, 0, -1, False, np.zeros(cap, np.int64), np.zeros(cap, np.int32),
-                  np.zeros(256, np.int64), nsplit, band, np.zeros(len(pos))) == 0
+                  np.zeros(256, np.int64), nsplit, band, np.zeros(len(pos)), 0) == 0
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -314,6 +314,45 @@ def test_resort_of_last_steps_tree_is_a_kd_order(seed, cap, band, wrapped):
         assert sorted(perm) == list(range(n))
         assert _kd_ordered(pos, perm, ntop, nn)
         pos = pos + np.random.default_rng(seed).normal(0, 0.05, pos.shape)
+
+
+@pytest.mark.parametrize("slab", [0, 1, 3, 4])
+def test_slab_levels_split_along_the_roots_axis(slab):
+    """A fresh tree with ``slab`` levels (the pool's domains as slabs): the
+    nodes fewer than ``slab`` levels down are split along the root's axis
+    (the longest of the whole box), the rest along their own longest; the
+    order is a kD order either way, and the nodes ``slab`` levels down are
+    slabs: their ranges along the root's axis do not overlap."""
+    from lockgraph.tree import AXIS, LEFT, PARENT, START, END, resort, skeleton
+    rng = np.random.default_rng(7)
+    n, leaf = 3000, 8
+    pos = rng.uniform(0, 1, (n, 3)) * [0.4, 0.3, 1.0]  # a column, like the bed
+    ntop = np.zeros((count_nodes(n, leaf), 6), np.int64)
+    nn = skeleton(n, leaf, ntop, np.zeros(256, np.int64))
+    perm = np.arange(n, dtype=np.int32)
+    assert resort(pos, perm, ntop, 0, -1, True, np.zeros(1, np.int64), np.zeros(1, np.int32),
+                  np.zeros(256, np.int64), np.full(nn, np.nan), 0.0, np.zeros(n), slab) == 0
+    assert _kd_ordered(pos, perm, ntop, nn)
+    assert ntop[0, AXIS] == 2
+    depth = np.zeros(nn, np.int64)
+    for nd in range(1, nn):  # parents come first in node order
+        depth[nd] = depth[ntop[nd, PARENT]] + 1
+    inner = ntop[:nn, LEFT] >= 0
+    own = np.zeros(nn, np.int64)
+    for nd in np.flatnonzero(inner):
+        box = pos[perm[ntop[nd, START]:ntop[nd, END]]]
+        own[nd] = np.argmax(box.max(axis=0) - box.min(axis=0))
+    top = inner & (depth < slab)
+    assert np.all(ntop[:nn, AXIS][top] == 2)
+    assert np.array_equal(ntop[:nn, AXIS][inner & ~top & (depth > 0)],
+                          own[inner & ~top & (depth > 0)])
+    if slab == 4:  # the bed's 16 domains: stacked along z
+        assert 0 < np.count_nonzero(own[top] != 2)  # not what the longest axis gives
+        spans = sorted((pos[perm[ntop[nd, START]:ntop[nd, END]], 2].min(),
+                        pos[perm[ntop[nd, START]:ntop[nd, END]], 2].max())
+                       for nd in np.flatnonzero(depth == slab))
+        assert len(spans) == 16
+        assert all(a[1] <= b[0] for a, b in zip(spans, spans[1:]))
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -426,7 +465,7 @@ def _steal(me, pos, perm, ntop, subroots, nsplit, lists, nbelow, ctl, stack=256)
     from lockgraph.tree import resort_stealing
     return resort_stealing(me, pos, perm, ntop, subroots[me], 2, False, np.zeros(4096, np.int64),
                            np.zeros(4096, np.int32), np.zeros(stack, np.int64), nsplit, 0.01,
-                           np.zeros(len(pos)), lists, nbelow, ctl)
+                           np.zeros(len(pos)), lists, nbelow, ctl, 0)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -440,11 +479,12 @@ def test_resort_stealing_is_resort(seed):
     pos, perm0, ntop, nn, ns0, subroots, lists, nbelow, ctl = _stealing_setup(seed, 2)
     args = (np.zeros(4096, np.int64), np.zeros(4096, np.int32), np.zeros(256, np.int64))
     want_perm, want_ns = perm0.copy(), ns0.copy()
-    assert resort(pos, want_perm, ntop, 0, -1, False, *args, want_ns, 0.01, np.zeros(len(pos))) == 0
+    assert resort(pos, want_perm, ntop, 0, -1, False, *args, want_ns, 0.01, np.zeros(len(pos)),
+                  0) == 0
     assert _kd_ordered(pos, want_perm, ntop, nn)
     for concurrent in (False, True):
         perm, ns = perm0.copy(), ns0.copy()
-        assert resort(pos, perm, ntop, 0, 1, False, *args, ns, 0.01, np.zeros(len(pos))) == 0
+        assert resort(pos, perm, ntop, 0, 1, False, *args, ns, 0.01, np.zeros(len(pos)), 0) == 0
         ctl[:] = 0
         res = [None, None]
 
