@@ -66,7 +66,8 @@ until every event already in flight elsewhere has committed (``_settle``:
 each of those reads the marks again at its commit, and has published its
 times before this one checks).
 
-**Which domain, cut how.**  The domains are the tree's nodes of one depth;
+**Which domain, cut how.**  The domains are the tree's nodes of one depth
+(slabs stacked along a long scene's longest axis: ``Engine._slab_levels``);
 a free thread claims the free domain with the earliest clock among those
 its two masks let it (``claim_masks``, by ``Engine.pool_claim``): the
 domains it claims first and those it may claim at all.  ``"band"`` (the
