@@ -350,7 +350,8 @@ def widen(k, new, parts, step, tree, nbrs, cfg, st, locks):
         ctr[CTR_BAD] = k
         return SIGMA_TOO_LARGE
     reach[k] = new
-    fetch_max(parb, P_RMAX, float_bits(new))
+    if load(parb, P_RMAX) < float_bits(new):  # read first: every event reads par's lines
+        fetch_max(parb, P_RMAX, float_bits(new))
     raise_reach(ntop, nreach_bits, k, new)
     st[S_GROW] += 1
     stack = work  # depth-first: never more entries than the tree's depth + 1
