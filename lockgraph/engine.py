@@ -68,6 +68,15 @@ STEAL_MIN_SLOTS = 1024
 # Pair search: about this many tasks per thread (nodes of N / (SEARCH_TASKS T)
 # slots at most, and the pairs between them), claimed in the recursion's order.
 SEARCH_TASKS = 32
+# How far an interior event may run ahead of the other threads' domains, in a
+# domain's mean times between events (``window_events``).  Under the pool 32:
+# on the bed, paired in one process against 8 (rounds of 3 steps), the step
+# 0.958-0.980 the time with 8 with the threads' cores far apart (30 and 26
+# rounds) and 0.931 near (4 rounds); 16: 0.983 far; 128 and unbounded: one
+# repair in 90 steps each, none with 32 in 180 (README, Benchmarks: "Slab
+# domains, and atomic maxima read first").  Under lock regions 8.
+POOL_WINDOW = 32.0
+LOCK_WINDOW = 8.0
 # The pool's domains are slabs (``Engine._slab_levels``) in a scene whose
 # longest side is at least this many times its second: there the tree's top
 # two levels split along that side anyway, so slabs add few faces between
@@ -327,8 +336,9 @@ class Engine:
         threads take in turn, events waiting by particle (``lockgraph/pool.py``;
         how the domains are cut and claimed: ``pool_split``, ``pool_claim``);
         ``lock`` and ``scale`` are not used.
-    window_events : float — how far an interior event may run ahead of the
-        other threads' domains, in units of a domain's mean time between events.
+    window_events : float or None — how far an interior event may run ahead
+        of the other threads' domains, in units of a domain's mean time between
+        events.  None: ``POOL_WINDOW`` (32) under ``schedule="pool"``, 8 else.
     stall_seconds : float — a step in which no thread completes an event for
         this long stops with an error (never a hang).
     balance : int or None — with threads > 1, tasks per thread in the phases
@@ -379,7 +389,7 @@ class Engine:
     def __init__(self, state, physics, dt, *, skin=0.5, leaf_size=16, collapse_limit=10000,
                  chunk_events=1 << 20, record_events=False, copy=True, rebuild_every=10,
                  threads=1, lock="graph", scale=4.0, policy="exact", schedule="parallel",
-                 window_events=8.0, stall_seconds=60.0, trace_locks=None, balance=None):
+                 window_events=None, stall_seconds=60.0, trace_locks=None, balance=None):
         dt = float(dt) if not isinstance(dt, bool) else float("nan")
         if not (dt > 0 and math.isfinite(dt)):
             raise InputError("dt", f"must be a finite number > 0 (got {dt!r})")
@@ -452,6 +462,11 @@ class Engine:
         # of the attempt that completed the step on the threads)
         self.pool_checked_steps = 0
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
+        if window_events is None:
+            window_events = POOL_WINDOW if schedule == "pool" else LOCK_WINDOW
+        if isinstance(window_events, bool) or not isinstance(window_events, (int, float)) \
+                or not window_events > 0:
+            raise InputError("window_events", f"must be a number > 0, got {window_events!r}")
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
         self.last_events = 0.0

@@ -161,9 +161,9 @@ RUNS_SPINS = 256
 RUNS_PAUSES = 8
 # the interior window (in a domain's mean times between events) of a step redone
 # on the threads after a violation (``Engine.pool_redo``).  Measured on the bed,
-# 16 domains: the default window of 8 events repairs the sixth step of every
-# run (an interior event run ahead of an earlier one three candidate hops away);
-# windows of 1 and 2 events had no repair in 50 steps and ran at 1.64 and 1.67x
+# 16 domains: the window of 8 events (the default until 2026-12-07) repaired the
+# sixth step of every run then (an interior event run ahead of an earlier one
+# three candidate hops away); windows of 1 and 2 events had no repair in 50 steps and ran at 1.64 and 1.67x
 # against 1.74x near (README, Benchmarks: "What the far cost is not")
 REDO_WINDOW = 2.0
 # per-domain row of dctl (four cache lines): its lock and its queue's version

@@ -149,8 +149,8 @@ class Simulation:
         than threads that any free thread takes, waiting by particle
         (``lockgraph/pool.py``; ``lock`` and ``scale`` are then not used); same
         result bit for bit (see ``Engine``).
-    window_events : float — how far ahead of the other threads an interior event
-        may run (see ``Engine``).
+    window_events : float or None — how far ahead of the other threads an
+        interior event may run (see ``Engine``; None: the schedule's default).
     skin, leaf_size, collapse_limit — engine tuning (see ``Engine``).
     copy : bool — with False the simulation takes over the state's arrays
         instead of copying them (for systems near the memory limit); the State
@@ -159,7 +159,7 @@ class Simulation:
 
     def __init__(self, state, physics, dt, *, threads=1, lock="graph", scale=4.0,
                  policy="exact", skin=0.5, leaf_size=16, collapse_limit=10000, copy=True,
-                 window_events=8.0, schedule="parallel"):
+                 window_events=None, schedule="parallel"):
         if not isinstance(state, State):
             raise InputError("state", f"must be a lockgraph.State, got {type(state).__name__}")
         if not isinstance(physics, Physics):

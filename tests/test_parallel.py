@@ -517,6 +517,14 @@ def test_options_are_checked():
     for bad in (-1, True, 1.5, "4"):
         with pytest.raises(InputError, match="^balance: must be an integer >= 0"):
             Engine(st, ph, 0.05, threads=2, balance=bad)
+    for bad in (0, -8.0, float("nan"), True, "8"):
+        with pytest.raises(InputError, match="^window_events: must be a number > 0"):
+            Engine(st, ph, 0.05, threads=2, window_events=bad)
+    # the default window: 32 of a domain's mean times between events under the
+    # pool, 8 under lock regions (engine.POOL_WINDOW, LOCK_WINDOW)
+    assert Engine(st, ph, 0.05, threads=2, schedule="pool").workers.window_events == 32.0
+    assert Engine(st, ph, 0.05, threads=2).workers.window_events == 8.0
+    assert Engine(st, ph, 0.05, threads=2, window_events=3).workers.window_events == 3.0
 
 
 def test_claimed_tasks_come_back_in_order_and_a_failure_is_raised():
