@@ -1263,8 +1263,9 @@ class Engine:
         the cost median: 8.7 %) and the step took 4.6 % less; on the ring
         (N = 2e5, a square sheet) slabs made the events 3 % slower: more
         faces between domains, and a run edge no shorter (README,
-        Benchmarks: "Slab domains, and atomic maxima read first").  Else 0: every node its own longest
-        axis.  The result does not depend on the tree (``test_determinism``)."""
+        Benchmarks: "Slab domains, and atomic maxima read first").  Else 0:
+        every node its own longest axis.  The result does not depend on the
+        tree (``test_determinism``)."""
         if self.schedule != "pool" or self.threads < 2 or self.n == 0:
             return 0
         if fresh or self._slabs is None:

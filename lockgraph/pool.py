@@ -163,8 +163,9 @@ RUNS_PAUSES = 8
 # on the threads after a violation (``Engine.pool_redo``).  Measured on the bed,
 # 16 domains: the window of 8 events (the default until 2026-12-07) repaired the
 # sixth step of every run then (an interior event run ahead of an earlier one
-# three candidate hops away); windows of 1 and 2 events had no repair in 50 steps and ran at 1.64 and 1.67x
-# against 1.74x near (README, Benchmarks: "What the far cost is not")
+# three candidate hops away); windows of 1 and 2 events had no repair in 50
+# steps and ran at 1.64 and 1.67x against 1.74x near (README, Benchmarks: "What
+# the far cost is not")
 REDO_WINDOW = 2.0
 # per-domain row of dctl (four cache lines): its lock and its queue's version
 # (bumped under the lock at every change of the queue); its clock and the time of
