@@ -20,6 +20,7 @@ the inverse rotation is not exact, a few ulps of the velocities).
 """
 import itertools
 import math
+import numbers
 import time
 
 import numpy as np
@@ -464,7 +465,7 @@ class Engine:
         self._fine_hop = None  # the mean hop between fine lock regions, last threaded step
         if window_events is None:
             window_events = POOL_WINDOW if schedule == "pool" else LOCK_WINDOW
-        if isinstance(window_events, bool) or not isinstance(window_events, (int, float)) \
+        if isinstance(window_events, bool) or not isinstance(window_events, numbers.Real) \
                 or not window_events > 0:
             raise InputError("window_events", f"must be a number > 0, got {window_events!r}")
         self.workers = (Workers(self.threads, window_events, stall_seconds)

@@ -525,6 +525,8 @@ def test_options_are_checked():
     assert Engine(st, ph, 0.05, threads=2, schedule="pool").workers.window_events == 32.0
     assert Engine(st, ph, 0.05, threads=2).workers.window_events == 8.0
     assert Engine(st, ph, 0.05, threads=2, window_events=3).workers.window_events == 3.0
+    # numpy's numbers are numbers too (np.int64 is not a Python int)
+    assert Engine(st, ph, 0.05, threads=2, window_events=np.int64(4)).workers.window_events == 4.0
 
 
 def test_claimed_tasks_come_back_in_order_and_a_failure_is_raised():
