@@ -28,7 +28,7 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .atomics import fetch_add, load, store
+from .atomics import claim_from_ends, fetch_add, load, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    cost_cut, cost_points, init_domains, pool_start, pool_state, restore_start,
                    two_hop_masks, work_split)
@@ -96,6 +96,19 @@ STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "po
 # end), claimed: a thread that starts late, or does other work first (the
 # top nodes' re-sort), takes fewer
 CHUNKS = 16
+# Each thread its own end.  On two threads every per-slot phase of a pool
+# step gives the first thread a run of slots from the front and the second
+# one from the back (``atomics.claim_from_ends``): the first phase's chunks,
+# the pair search's tasks, the first events and queues of the domains
+# (``pool.init_domains``) and the step end, as the events give each thread
+# its run of domains (``pool.claim_masks``: the first thread the lowest).
+# So the lines of a thread's domains that the first events and the queues
+# write are in its own core's caches when its events read them; taken in
+# turn, half came from the other core's, at 3-4 times the cost when the
+# host puts the two virtual CPUs on cores far apart
+# (``benchmarks/host_probe.py``).  The storage permutation stays by arrays:
+# by halves it took 1.3 ms longer on the ring.  README, Benchmarks: "Each
+# thread its own end".
 
 
 @kernel
@@ -115,16 +128,19 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep, v_
 
 
 @kernel
-def _finish_claimed(nthr, ctl, pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep,
-                    v_sleep):
-    """One thread's share of the step end (``_finish``): chunks of the
-    particles claimed with an atomic fetch-add on ``ctl[0]`` (0 at the
-    start) until none is left, so that the threads end together however
-    late each started."""
+def _finish_claimed(me, nthr, ctl, pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end,
+                    t_sleep, v_sleep):
+    """Thread ``me`` of ``nthr``'s share of the step end (``_finish``):
+    chunks of the particles claimed with an atomic fetch-add on ``ctl[0]``
+    (0 at the start) until none is left, so that the threads end together
+    however late each started; on two threads from the two ends
+    (``atomics.claim_from_ends``)."""
     n = pos.shape[0]
     nchunks = CHUNKS * nthr
+    r = 0
     while True:
-        q = fetch_add(ctl, 0, 1)
+        q = claim_from_ends(ctl[:1], me, nthr, r, nchunks)
+        r += 1
         if q >= nchunks:
             return 0
         lo = n * q // nchunks
@@ -151,9 +167,10 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     The last thread re-sorts the nodes above the threads' subtrees (``depth_split``
     levels, ``tree.resort``) while the others start on the per-particle
     passes; then every thread claims chunks of the particles (``ctl``'s
-    NEXT_CHUNK) and clears their per-step arrays (``K.reset_step``) and,
-    with ``reaches``, gives them Hill's kick for time h (omega and h
-    nonzero: the step's first half kick) and their step-start reaches
+    NEXT_CHUNK; on two threads from the two ends) and clears their
+    per-step arrays (``K.reset_step``) and, with ``reaches``, gives them
+    Hill's kick for time h (omega and h nonzero: the step's first half
+    kick) and their step-start reaches
     (``K.compute_reach``), the two largest of which go to ``tops[me]``;
     then, once the top nodes are done, re-sorts its subtrees
     (``tree.resort_stealing``: subtrees me, me + nthr, ...).  One call a
@@ -171,8 +188,10 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
         store(ctl, TOP_DONE, 1 if ok >= 0 else -1)
     top = tops[me]  # zeros: compute_reach takes in each chunk's reaches
     nchunks = CHUNKS * nthr
+    r = 0
     while True:
-        q = fetch_add(ctl, NEXT_CHUNK, 1)
+        q = claim_from_ends(ctl[NEXT_CHUNK:NEXT_CHUNK + 1], me, nthr, r, nchunks)
+        r += 1
         if q >= nchunks:
             break
         lo = n * q // nchunks
@@ -785,10 +804,10 @@ class Engine:
         wp = ph.domain.wrap_params(self.time)
         ctl = self._scratch.get("finish", (8,), np.int64)
         self._pmap(_finish_claimed, [
-            (self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
+            (k, self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
              hill.omega if hill is not None else 0.0, not check_end,
              self.tlast if self.sleeping else NO_SLEEP, self.time, self.par[K.P_TSLEEP],
-             self.par[K.P_VSLEEP])] * self.threads)
+             self.par[K.P_VSLEEP]) for k in range(self.threads)])
         if self.workers is not None:
             self.workers.rest()
         self._accumulate(st)
@@ -911,7 +930,8 @@ class Engine:
             res = self._pmap(pair_search_claimed, [
                 (self.anc, self.reach, self.ntop, self.nbox, self.nreach, self.stasks, nt,
                  self.sclaim, img_pos, self.out_a[k], self.out_e[k], self.stack2[k],
-                 self.search_work2[k], self.sseg, k) for k in range(self.threads)])
+                 self.search_work2[k], self.sseg, k, self.threads)
+                for k in range(self.threads)])
             if min(res) < 0:
                 raise SimulationError("pair search deeper than its work stack")
             self.npairs_part[:] = res

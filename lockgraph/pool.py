@@ -138,15 +138,15 @@ run).
 import numpy as np
 
 from ._jit import kernel
-from .atomics import (bits_float, cas, cpu_relax, cycles, fetch_max, float_bits, load,
-                      sched_yield, spin_lock, spin_unlock, store)
+from .atomics import (bits_float, cas, claim_from_ends, cpu_relax, cycles, fetch_max, float_bits,
+                      load, sched_yield, spin_lock, spin_unlock, store)
 from .events import update_queue, update_queue_pair
 from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_ASKED, S_BLOCKED, S_CLAIMS, S_CONC,
                       S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, hop2, init_range,
                       journal_room, process_event)
 from .neighbors import LCOUNT
 from .parallel import (ABORT, JITTER, NOWAIT, TIME_EVERY, _fail, _pause, _progress,
-                       cache_aligned, next_task, wait_blocked)
+                       cache_aligned, wait_blocked)
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
@@ -263,7 +263,7 @@ def two_hop_masks(me, nthr, claim, hops, sdom, noff, nent, dlo, dhi):
     nd = dlo.shape[0]
     r = 0
     while True:
-        d = next_task(claim, me, nthr, r)
+        d = claim_from_ends(claim, me, nthr, r, nd)
         r += 1
         if d >= nd:
             return 0
@@ -276,7 +276,8 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
                  dtour_s, adj, masks):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
     (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
-    (``parallel.next_task``), and of the domains' ``domain_adjacency`` when
+    (``atomics.claim_from_ends``: on two threads the first from the front,
+    the second from the back), and of the domains' ``domain_adjacency`` when
     ``adj`` has a row for them; with ``masks``, also every slot's one-hop
     mask (then ``two_hop_masks``).  One call a thread, not one a domain: each
     call from Python takes the GIL, and two threads taking it in turn wait
@@ -284,7 +285,7 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
     nd = dlo.shape[0]
     r = 0
     while True:
-        d = next_task(claim, me, nthr, r)
+        d = claim_from_ends(claim, me, nthr, r, nd)
         r += 1
         if d >= nd:
             return 0

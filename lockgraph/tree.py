@@ -27,7 +27,7 @@ Particles are stored in tree order: node ``k`` covers slots
 import numpy as np
 
 from ._jit import kernel
-from .atomics import cas, fetch_add, fetch_max, float_bits, load, store
+from .atomics import cas, claim_from_ends, fetch_add, fetch_max, float_bits, load, store
 
 LEFT, RIGHT, START, END, PARENT, AXIS = 0, 1, 2, 3, 4, 5
 NTOP = 6
@@ -848,11 +848,13 @@ def search_frontier(ntop, nbox, nreach, img_pos, images, max_size, tasks, stack)
 
 @kernel
 def pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos, out_a,
-                        out_e, stack, work, seg, me):
+                        out_e, stack, work, seg, me, nthr):
     """One thread's share of a pair search over ``tasks[:ntasks]`` (from
-    ``search_frontier``): it claims the next task with an atomic fetch-add on
-    ``claim[0]`` (start at 0) until none is left, so a thread slowed down
-    (another guest on its core) takes fewer.  Task q's pairs go to this
+    ``search_frontier``): thread ``me`` of ``nthr`` claims the next task with
+    an atomic fetch-add on ``claim[0]`` (start at 0) until none is left, so a
+    thread slowed down (another guest on its core) takes fewer; on two
+    threads the first from the front, the second from the back
+    (``atomics.claim_from_ends``).  Task q's pairs go to this
     thread's ``out_a``, ``out_e`` (as ``pair_search``), and ``seg[q] = (me,
     first, count)`` says where: ``build_csr`` reads them in task order, so
     the lists do not depend on which thread ran which task.  Returns this
@@ -863,8 +865,10 @@ def pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, im
     count = 0
     visits = 0.0
     tests = 0.0
+    r = 0
     while True:
-        q = fetch_add(claim, 0, 1)
+        q = claim_from_ends(claim, me, nthr, r, ntasks)
+        r += 1
         if q >= ntasks:
             break
         first = min(count, cap)

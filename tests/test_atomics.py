@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from lockgraph.atomics import (cas, fetch_add, fetch_max, fetch_or, load, prefetch_read,
-                               prefetch_write, store)
+from lockgraph.atomics import (cas, claim_from_ends, fetch_add, fetch_max, fetch_or, load,
+                               prefetch_read, prefetch_write, store)
 
 X86 = platform.machine() in ("x86_64", "AMD64")
 
@@ -75,3 +75,50 @@ class TestReadModifyWrite:
         # the issue's measured fact: a CAS is one ``lock cmpxchg``
         asm = _asm(_rmw)
         assert "lock" in asm and "cmpxchg" in asm
+
+
+@njit(nogil=True)
+def _claims(claim, me, nthr, ntasks, out):
+    """Thread me's claims (claim_from_ends) until none is left, into out;
+    returns how many it took."""
+    r = 0
+    while True:
+        q = claim_from_ends(claim, me, nthr, r, ntasks)
+        if q >= ntasks:
+            return r
+        out[r] = q
+        r += 1
+
+
+@pytest.mark.parametrize("nthr", [1, 2, 3])
+@pytest.mark.parametrize("ntasks", [1, 2, 7, 64, 5000])
+def test_claims_from_the_ends_take_every_task_once(nthr, ntasks):
+    """Every task is taken exactly once, by threads racing for them; on two
+    threads the first's tasks are a run from the front in order and the
+    second's a run from the back in reverse (so each thread's share is one
+    run of slots), on one or three threads they are plain fetch-add claims."""
+    import threading
+
+    claim = np.zeros(8, np.int64)
+    outs = [np.full(ntasks, -1, np.int64) for _ in range(nthr)]
+    took = [0] * nthr
+
+    def run(k):
+        took[k] = _claims(claim, k, nthr, ntasks, outs[k])
+    pool = [threading.Thread(target=run, args=(k,)) for k in range(nthr)]
+    for th in pool:
+        th.start()
+    for th in pool:
+        th.join()
+    got = np.sort(np.concatenate([o[:t] for o, t in zip(outs, took)]))
+    assert np.array_equal(got, np.arange(ntasks))
+    if nthr == 2:
+        assert np.array_equal(outs[0][:took[0]], np.arange(took[0]))
+        assert np.array_equal(outs[1][:took[1]], np.arange(ntasks - 1, took[0] - 1, -1))
+
+
+def test_claims_with_fixed_shares_deal_the_tasks_in_turn():
+    """No claim word (``balance`` 0): task me + r nthr, nothing claimed."""
+    out = np.full(10, -1, np.int64)
+    assert _claims(np.zeros(0, np.int64), 1, 3, 10, out) == 3
+    assert out[:3].tolist() == [1, 4, 7]

@@ -477,6 +477,52 @@ def test_the_permutation_leaves_the_step_start_values(sequential, name):
     assert len(eng.tlast) == (eng.n if name == "dish_marble" else 0)
 
 
+@pytest.mark.parametrize("threads", [2, 3])
+@pytest.mark.parametrize("guarded", [False, True])
+def test_the_threads_permutation_is_the_gather(threads, guarded):
+    """The storage permutation on the threads (``engine._permute_and_anchor``,
+    by arrays, claimed) gives every array a[perm], and the anchors, start
+    velocities, counts and guard clocks (``pool_start``) the same, whichever
+    thread took which array."""
+    import threading
+
+    from lockgraph.engine import _permute_and_anchor
+    from lockgraph.parallel import NCTRL, cache_aligned
+    from lockgraph.pool import pool_start
+    n = 600
+    rng = np.random.default_rng(7)
+    perm = rng.permutation(n)
+    arrays = dict(pos=rng.random((n, 3)), vel=rng.random((n, 3)), rad=rng.random(n),
+                  mass=rng.random(n), ncoll=rng.integers(0, 2**62, n),
+                  ids=rng.permutation(n).astype(np.int32), reach=rng.random(n),
+                  tlast=rng.random(n) if guarded else np.zeros(0))
+    want = {k: v[perm] if len(v) else v for k, v in arrays.items()}
+    start = pool_start(n, {}, len(arrays["tlast"]))
+    anc = np.zeros((n, 3))
+    arrived = cache_aligned((8,), np.int64)[:1]
+    claim = cache_aligned((8,), np.int64)[:1]
+    res = [None] * threads
+
+    def run(k):
+        res[k] = _permute_and_anchor(
+            k, threads, claim, arrived, np.zeros(NCTRL, np.int64), arrays["pos"], arrays["vel"],
+            arrays["rad"], arrays["mass"], arrays["ncoll"], arrays["ids"], arrays["reach"],
+            arrays["tlast"], perm.copy(), np.zeros(n), anc, np.zeros((1, 8), np.int64),
+            np.zeros(0, np.int64), np.zeros((1, 6)), np.zeros(1),
+            np.zeros((threads, 1), np.int64), start)
+    pool = [threading.Thread(target=run, args=(k,)) for k in range(threads)]
+    for th in pool:
+        th.start()
+    for th in pool:
+        th.join()
+    assert res == [0] * threads
+    for k, v in want.items():
+        assert np.array_equal(arrays[k], v), k
+    vel0, ncoll0, tlast0 = start
+    assert np.array_equal(anc, want["pos"]) and np.array_equal(vel0, want["vel"])
+    assert np.array_equal(ncoll0, want["ncoll"]) and np.array_equal(tlast0, want["tlast"])
+
+
 def violating_first_attempts(eng, steps):
     """Make the first pool attempt of each step in ``steps`` (engine step
     counts) report a violation after all its events ran; returns the list of

@@ -39,7 +39,7 @@ def claimed_search(anc, reach, ntop, nbox, nreach, img_pos, half, max_size, cap,
     def run(k):
         res[k] = pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, nt, claim, img_pos,
                                      out[k][0], out[k][1], np.zeros((4096, 3), np.int64),
-                                     np.zeros(2), seg, k)
+                                     np.zeros(2), seg, k, threads)
     pool = [threading.Thread(target=run, args=(k,)) for k in range(threads)]
     for th in pool:
         th.start()
@@ -411,7 +411,9 @@ def test_claimed_search_lists_do_not_depend_on_the_threads(seed):
     assert sum(two[0]) == one[0][0]
     for k in range(2):  # each thread's segments tile its output in claim order
         mine = seg[seg[:, 0] == k]
-        mine = mine[np.argsort(mine[:, 1])]
+        # by where each starts (a task with no pairs first among those starting
+        # where it does): the claim order, whichever end a thread claims from
+        mine = mine[np.lexsort((mine[:, 2], mine[:, 1]))]
         assert (mine[:, 1] == np.concatenate([[0], np.cumsum(mine[:, 2])[:-1]])).all()
         assert mine[:, 2].sum() == two[0][k]
     assert np.array_equal(one[4], two[4]) and np.array_equal(one[5], two[5])
@@ -436,7 +438,7 @@ def test_claimed_search_buffers_and_stack_short():
     assert pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, nt, claim, img_pos,
                                np.zeros(10, np.int32), np.zeros(10, np.int32),
                                np.zeros((2, 3), np.int64), np.zeros(2),
-                               np.zeros((nt, 3), np.int64), 0) == -1
+                               np.zeros((nt, 3), np.int64), 0, 1) == -1
     assert claim[0] == nt  # nothing left for the others
 
 
