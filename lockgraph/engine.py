@@ -96,12 +96,13 @@ STATUS_NAMES = {K.OK: "ok", K.NEED_JOURNAL: "need journal", K.POOL_OVERFLOW: "po
 # end), claimed: a thread that starts late, or does other work first (the
 # top nodes' re-sort), takes fewer
 CHUNKS = 16
-# Each thread its own end.  On two threads every per-slot phase of a pool
-# step gives the first thread a run of slots from the front and the second
-# one from the back (``atomics.claim_from_ends``): the first phase's chunks,
-# the pair search's tasks, the first events and queues of the domains
-# (``pool.init_domains``) and the step end, as the events give each thread
-# its run of domains (``pool.claim_masks``: the first thread the lowest).
+# Each thread its own end.  On two threads every claimed per-slot phase of
+# a step gives the first thread a run of slots from the front and the
+# second one from the back (``atomics.claim_from_ends``): the first phase's
+# chunks, the pair search's tasks, the step end and, under the pool, the
+# first events and queues of the domains (``pool.init_domains``), as the
+# pool's events give each thread its run of domains (``pool.claim_masks``:
+# the first thread the lowest).
 # So the lines of a thread's domains that the first events and the queues
 # write are in its own core's caches when its events read them; taken in
 # turn, half came from the other core's, at 3-4 times the cost when the
