@@ -202,22 +202,29 @@ def spin_unlock(word, i):
 
 
 @kernel(inline=True)
+def next_task(claim, me, nthr, r):
+    """Thread ``me`` of ``nthr``'s ``r``-th task (from 0) in a phase of
+    claimed tasks: the next one by an atomic fetch-add on ``claim[0]`` (0 at
+    the phase start), so a thread slowed down takes fewer; with ``claim``
+    empty (fixed shares), task me + r nthr."""
+    if claim.shape[0] > 0:
+        return fetch_add(claim, 0, 1)
+    return me + r * nthr
+
+
+@kernel(inline=True)
 def claim_from_ends(claim, me, nthr, r, ntasks):
-    """Thread ``me`` of ``nthr``'s ``r``-th task (from 0) of ``ntasks`` in slot
-    order, claimed by an atomic fetch-add on ``claim[0]`` (0 at the phase
-    start; a thread slowed down takes fewer); on two threads the first
-    takes them from the front and the second from the back (its ``r``-th:
-    ntasks - 1 - r).  ``ntasks`` or more: none left.  The fetch-add counts
-    the tasks both took, so the two ends never pass each other and each
-    thread's share is one run of slots, the first thread's the lowest, as
-    its run of the pool's domains (``pool.claim_masks``): what a thread
-    writes in one phase it reads in the next from its own core's caches
-    (``engine.py``: "Each thread its own end").  With ``claim`` empty
-    (fixed shares): task me + r nthr."""
-    if claim.shape[0] == 0:
-        return me + r * nthr
-    k = fetch_add(claim, 0, 1)
-    if nthr != 2 or k >= ntasks:
+    """``next_task`` over ``ntasks`` tasks in slot order, but with claims on
+    two threads the first takes them from the front and the second from
+    the back (its ``r``-th: ntasks - 1 - r).  ``ntasks`` or more: none left.
+    The fetch-add counts the tasks both took, so the two ends never pass
+    each other and each thread's share is one run of slots, the first
+    thread's the lowest, as its run of the pool's domains
+    (``pool.claim_masks``): what a thread writes in one phase it reads in
+    the next from its own core's caches (``engine.py``: "Each thread its
+    own end")."""
+    k = next_task(claim, me, nthr, r)
+    if claim.shape[0] == 0 or nthr != 2 or k >= ntasks:
         return k
     return r if me == 0 else ntasks - 1 - r
 

@@ -28,13 +28,12 @@ import numpy as np
 from . import kernels as K
 from ._jit import kernel
 from . import locks as L
-from .atomics import claim_from_ends, fetch_add, load, store
+from .atomics import claim_from_ends, fetch_add, load, next_task, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    cost_cut, cost_points, init_domains, pool_start, pool_state, restore_start,
                    two_hop_masks, work_split)
 from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
-                       classify_ranges, classify_regions, cycles_per_second, next_task,
-                       pause_spin)
+                       classify_ranges, classify_regions, cycles_per_second, pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import BUCKET_BITS, tournament_size
@@ -223,7 +222,7 @@ def _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlas
                    anc, start):
     """Thread ``me`` of ``nthr``'s share of the storage permutation
     (``Engine._permute``), an array a task (``PERMUTED``, and ``tlast`` if it
-    is per particle; ``parallel.next_task``).  ``buf`` (N,) float64 is this
+    is per particle; ``atomics.next_task``).  ``buf`` (N,) float64 is this
     thread's gather buffer, seen as each array's type.  The positions are
     gathered through ``anc`` (N, 3), which is left holding them: the step's
     anchors.  ``start = (vel0, ncoll0, tlast0)``, a pool step's step-start

@@ -49,7 +49,7 @@ import time
 import numpy as np
 
 from ._jit import kernel
-from .atomics import (bits_float, cpu_relax, cycles, fetch_add, float_bits, load, sched_yield,
+from .atomics import (bits_float, cpu_relax, cycles, float_bits, load, sched_yield,
                       sleep_us)
 from .atomics import spin_lock, spin_unlock, store, cas
 from .errors import InputError
@@ -650,17 +650,6 @@ def _await_done(sync, n, gen, wait_cycles, jump_cycles):
             prev = cycles()  # the sleep itself is no sign of a busy machine
         else:
             sched_yield()
-
-
-@kernel(inline=True)
-def next_task(claim, me, nthr, r):
-    """Thread ``me`` of ``nthr``'s ``r``-th task (from 0) in a phase of
-    claimed tasks: the next one by an atomic fetch-add on ``claim[0]`` (0 at
-    the phase start), so a thread slowed down takes fewer; with ``claim``
-    empty (fixed shares), task me + r nthr."""
-    if claim.shape[0] > 0:
-        return fetch_add(claim, 0, 1)
-    return me + r * nthr
 
 
 _RUSAGE_THREAD = getattr(resource, "RUSAGE_THREAD", None)
