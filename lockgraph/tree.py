@@ -87,6 +87,24 @@ def _select_keyed(perm, keys, off, lo, hi, k):
             return
 
 
+@kernel
+def median_of(a, perm):
+    """np.median(a), bit for bit, with ``a`` reordered (scratch) and ``perm``
+    (int64, as long) scratch: the middle value by selection, and for an even
+    count the mean of the two middle ones.  In Python, np.median of the
+    engine's 1,024 sampled speeds took 0.2 ms of each ring step."""
+    m = a.shape[0]
+    h = m // 2
+    _select_keyed(perm, a, 0, 0, m - 1, h)
+    hi = a[h]
+    if m % 2 == 1:
+        return hi
+    lo = a[0]
+    for q in range(1, h):  # the largest of the lower half
+        lo = max(lo, a[q])
+    return (lo + hi) / 2.0
+
+
 @kernel(inline=True)
 def _split_keyed(pos, perm, axis, s, e, m, keys):
     """perm[s..e-1] split so that its m - s smallest keys come first; returns
