@@ -853,6 +853,36 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
 
 
 @kernel
+def pool_rows(pctl, nd, dtour_t, dtour_s, own, allowed, runs, ctrl, jitter, nowait):
+    """The pool's shared words at the start of a ``Workers.run_pool`` call:
+    the workers' control words (``ctrl``: all 0 but the fault injection's
+    ``JITTER`` seed and ``NOWAIT``); each domain's clock (its queue's root,
+    INF when empty), nothing in flight, no owner, no progress, lock and
+    version 0 (its latest event time and its counts, ``PHIGH`` on, are
+    kept: a call after a grown journal resumes the step); each thread's
+    masks (``claim_masks``) and ``runs``.  A kernel: as array operations
+    these took 0.085 ms of a ring pool step, with the pool thread idle."""
+    for c in range(ctrl.shape[0]):
+        ctrl[c] = 0
+    ctrl[JITTER] = jitter
+    ctrl[NOWAIT] = nowait
+    inf = float_bits(INF)
+    for d in range(nd):
+        for c in range(PHIGH):
+            pctl[d, c] = 0
+        i = dtour_s[d, 1]
+        pctl[d, PCLOCK] = float_bits(dtour_t[d, 1]) if i >= 0 else inf
+        pctl[d, PINFL] = inf
+        pctl[d, POWNER] = -1
+        pctl[d, PSETTLE] = 0
+        pctl[d, PPROG] = 0
+    for k in range(own.shape[0]):
+        pctl[nd + 1 + k, POWN] = own[k]
+        pctl[nd + 1 + k, PALLOW] = allowed[k]
+        pctl[nd + 1 + k, PRUNS] = runs
+
+
+@kernel
 def hold_until_abort(dctl, ctrl):
     """Tests: the thread holding domain 0 (taken for it before the workers
     start: ``Workers.run_pool``) never runs or releases it (under "runs":
@@ -934,53 +964,124 @@ def claim_masks(claim, nd, nthr, adj=None, work=None):
       claim any.
       The particles inside a run away from its edge are then written by one
       thread only.
+
+    The runs are cut in a kernel (``_run_masks``): in Python they took 0.11
+    ms of a ring pool step, with the pool thread idle.
     """
+    own = np.empty(nthr, np.int64)
+    allowed = np.empty(nthr, np.int64)
+    if claim in ("band", "runs"):
+        w = np.zeros(nd, np.int64) if work is None else np.asarray(work, np.int64)
+        band = claim == "band"
+        _run_masks(w, nthr, np.asarray(adj, np.int64) if band else w[:0], band, own, allowed,
+                   np.empty(nd + 1, np.int64))
+        return own, allowed
     full = (1 << nd) - 1
-    own = [full] * nthr
-    allowed = [full] * nthr
     if claim == "home":
-        own = [sum(1 << d for d in range(*home_range(k, nthr, nd))) for k in range(nthr)]
-    elif claim in ("band", "runs"):
-        w = np.ones(nd, np.int64) if work is None else np.asarray(work, np.int64) + 1
-        cum = np.concatenate([[0], np.cumsum(w)])
-        # run k ends at the domain edge nearest k/nthr of the total (integers)
-        cut = [0] + [int(np.abs(cum * nthr - cum[-1] * k).argmin()) for k in range(1, nthr)]
-        cut = np.maximum.accumulate(cut + [nd])
-        for k in range(nthr):
-            own[k] = sum(1 << d for d in range(cut[k], cut[k + 1]))
-            near = own[k]
-            if claim == "band":
-                for d in range(cut[k], cut[k + 1]):
-                    near |= int(adj[d])
-            allowed[k] = near if own[k] or claim == "runs" else full
-    elif claim != "earliest":
+        own[:] = [sum(1 << d for d in range(*home_range(k, nthr, nd))) for k in range(nthr)]
+    elif claim == "earliest":
+        own[:] = full
+    else:
         raise ValueError(f"unknown claim {claim!r}")
-    return (np.array(own, np.uint64).view(np.int64), np.array(allowed, np.uint64).view(np.int64))
+    allowed[:] = full
+    return own, allowed
+
+
+@kernel
+def _run_masks(work, nthr, adj, band, own, allowed, cum):
+    """``claim_masks``' runs: run k of nthr ends at the domain edge nearest
+    k/nthr of the total of ``work`` + 1 (the first such, in whole numbers),
+    no earlier than run k - 1; ``adj`` (band only): each domain's
+    neighbours; ``cum`` (nd + 1,): scratch."""
+    nd = work.shape[0]
+    cum[0] = 0
+    for d in range(nd):
+        cum[d + 1] = cum[d] + work[d] + 1
+    full = (np.int64(1) << nd) - 1 if nd < 64 else np.int64(-1)
+    prev = 0
+    for k in range(nthr):
+        end = nd
+        if k < nthr - 1:
+            best = 0
+            bd = abs(cum[0] * nthr - cum[nd] * (k + 1))
+            for q in range(1, nd + 1):
+                dq = abs(cum[q] * nthr - cum[nd] * (k + 1))
+                if dq < bd:
+                    bd = dq
+                    best = q
+            end = max(best, prev)
+        m = np.int64(0)
+        near = np.int64(0)
+        for d in range(prev, end):
+            m |= np.int64(1) << d
+            if band:
+                near |= adj[d]
+        own[k] = m
+        allowed[k] = (m | near) if m != 0 or not band else full
+        prev = end
 
 
 def cost_points(work, dlo, dhi, cis, nthr):
     """Where a step's runs should end: the cost of slots 0..s-1 (float) at
     every domain edge s and at the slot nearest k/nthr of the total cost
     (k = 1..nthr-1), each domain's cycles ``work`` (nd,) shared over its
-    slots by their collisions in the step (``cis``) plus one.  Returns a
-    dict {slot: cost} and the list of the cut slots; only the domains holding
-    a cut are summed slot by slot (the ring, N = 2e5: a pass over every slot
-    took 1-2 ms of a 25 ms step), in a kernel (``_nearest_cost``)."""
-    work = np.asarray(work, np.float64)
-    cumd = np.concatenate([[0.0], np.cumsum(work)])
-    points = {int(lo): float(c) for lo, c in zip(dlo, cumd[:-1])}
-    points[int(dhi[-1])] = float(cumd[-1])
-    cuts = []
+    slots by their collisions in the step (``cis``) plus one.  Returns
+    ``(slots, costs, cuts)``: the slots (int64) and their costs (float64),
+    each slot once (the edges in order, then any cut that is not an edge),
+    and the cut slots (int64, one per k whose share falls in a domain with
+    work).  Only the domains holding a cut are summed slot by slot (the
+    ring, N = 2e5: a pass over every slot took 1-2 ms of a 25 ms step), all
+    of it in a kernel (``_cost_points``; in Python 0.13 ms of a ring pool
+    step, with the pool thread idle)."""
+    nd = len(dlo)
+    slots = np.empty(nd + nthr, np.int64)
+    costs = np.empty(nd + nthr, np.float64)
+    cuts = np.empty(max(nthr - 1, 0), np.int64)
+    npt, ncut = _cost_points(np.asarray(work, np.float64), dlo, dhi, cis, nthr, slots, costs,
+                             cuts, np.empty(nd + 1))
+    return slots[:npt], costs[:npt], cuts[:ncut]
+
+
+@kernel
+def _cost_points(work, dlo, dhi, cis, nthr, slots, costs, cuts, cumd):
+    """``cost_points`` into slots, costs, cuts; their counts.  ``cumd``
+    (nd + 1,): scratch."""
+    nd = work.shape[0]
+    cumd[0] = 0.0
+    for d in range(nd):
+        cumd[d + 1] = cumd[d] + work[d]
+    npt = 0
+    for d in range(nd + 1):
+        s = dlo[d] if d < nd else dhi[nd - 1]
+        if npt > 0 and slots[npt - 1] == s:  # an empty domain: its edge once, the last cost
+            costs[npt - 1] = cumd[d]
+        else:
+            slots[npt] = s
+            costs[npt] = cumd[d]
+            npt += 1
+    ncut = 0
     for k in range(1, nthr):
-        target = cumd[-1] * k / nthr
-        q = int(np.searchsorted(cumd, target, side="right")) - 1
-        if not 0 <= q < len(work) or work[q] <= 0:
+        target = cumd[nd] * k / nthr
+        q = np.searchsorted(cumd, target, side="right") - 1
+        if q < 0 or q >= nd or not work[q] > 0:
             continue
-        lo, hi = int(dlo[q]), int(dhi[q])
-        s, c = _nearest_cost(cis, lo, hi, cumd[q], work[q], target)
-        points.setdefault(s, c)
-        cuts.append(s)
-    return points, cuts
+        s, c = _nearest_cost(cis, dlo[q], dhi[q], cumd[q], work[q], target)
+        if _find(slots, npt, s) < 0:
+            slots[npt] = s
+            costs[npt] = c
+            npt += 1
+        cuts[ncut] = s
+        ncut += 1
+    return npt, ncut
+
+
+@kernel(inline=True)
+def _find(a, n, x):
+    """The first k < n with a[k] == x; -1 if none."""
+    for k in range(n):
+        if a[k] == x:
+            return k
+    return -1
 
 
 @kernel
@@ -1010,22 +1111,56 @@ def _nearest_cost(cis, lo, hi, base, work, target):
 
 def cost_cut(dlo, dhi, cost):
     """Domains (dlo, dhi) with one more edge at each cut slot of ``cost =
-    (points, cuts)`` (``cost_points``) inside a domain, that domain split in
-    two, and each domain's cost (int64); (dlo, dhi, None) unchanged if an
-    edge has no cost in ``points`` (another cut of the slots than the last
-    step's)."""
-    points, cuts = cost
-    lo = [int(x) for x in dlo]
-    hi = [int(x) for x in dhi]
-    for s in sorted(set(cuts)):
-        if len(lo) >= MAX_DOMAINS:
-            break
-        for q in range(len(lo)):
-            if lo[q] < s < hi[q]:
-                lo.insert(q + 1, s)
-                hi.insert(q, s)
-                break
-    if any(x not in points for x in lo + hi):
+    (slots, costs, cuts)`` (``cost_points``) inside a domain, that domain
+    split in two, and each domain's cost (int64, rounded); (dlo, dhi, None)
+    unchanged if an edge has no cost in ``slots`` (another cut of the slots
+    than the last step's).  In a kernel (``_cost_cut``): in Python 0.07 ms
+    of a ring pool step."""
+    slots, costs, cuts = cost
+    out = np.empty((3, len(dlo) + len(cuts)), np.int64)
+    m = _cost_cut(dlo, dhi, slots, costs, cuts, out[0], out[1], out[2])
+    if m < 0:
         return dlo, dhi, None
-    work = np.array([round(points[b] - points[a]) for a, b in zip(lo, hi)], np.int64)
-    return np.array(lo, np.int64), np.array(hi, np.int64), work
+    return out[0, :m], out[1, :m], out[2, :m]
+
+
+@kernel
+def _cost_cut(dlo, dhi, slots, costs, cuts, lo, hi, work):
+    """``cost_cut`` into lo, hi, work; the domains' count, or -1 when an
+    edge has no cost.  The cuts are taken in slot order, each once (sorted
+    in place: ``cost_points`` gives them in order already)."""
+    for k in range(1, cuts.shape[0]):
+        x = cuts[k]
+        r = k
+        while r > 0 and cuts[r - 1] > x:
+            cuts[r] = cuts[r - 1]
+            r -= 1
+        cuts[r] = x
+    m = dlo.shape[0]
+    for q in range(m):
+        lo[q] = dlo[q]
+        hi[q] = dhi[q]
+    for k in range(cuts.shape[0]):
+        s = cuts[k]
+        if k > 0 and s == cuts[k - 1]:
+            continue
+        if m >= MAX_DOMAINS:
+            break
+        for q in range(m):
+            if lo[q] < s < hi[q]:  # domain q becomes q (lo..s) and q + 1 (s..hi)
+                for r in range(m, q + 1, -1):
+                    lo[r] = lo[r - 1]
+                    hi[r] = hi[r - 1]
+                hi[q + 1] = hi[q]
+                lo[q + 1] = s
+                hi[q] = s
+                m += 1
+                break
+    npt = slots.shape[0]
+    for q in range(m):
+        a = _find(slots, npt, lo[q])
+        b = _find(slots, npt, hi[q])
+        if a < 0 or b < 0:
+            return -1
+        work[q] = np.int64(np.rint(costs[b] - costs[a]))  # half to even, as round()
+    return m

@@ -364,12 +364,14 @@ def test_the_runs_end_at_equal_shares_of_the_cost(seed):
     work = rng.integers(1, 10**6, nd)
     cis = rng.poisson(2.0, n)
     ccum = cost_by_brute_force(work, dlo, dhi, cis)
-    points, got = cost_points(work, dlo, dhi, cis, nthr)
+    slots, costs, got = cost_points(work, dlo, dhi, cis, nthr)
+    points = dict(zip(slots.tolist(), costs.tolist()))
+    assert len(points) == len(slots)  # each slot once
     cuts = [int(np.abs(ccum - ccum[-1] * k / nthr).argmin()) for k in range(1, nthr)]
-    assert got == cuts
+    assert got.tolist() == cuts
     assert set(points) == set(dlo) | {n} | set(cuts)
     assert np.allclose([points[s] for s in sorted(points)], ccum[sorted(points)], rtol=1e-12)
-    lo, hi, cost = cost_cut(dlo, dhi, (points, got))
+    lo, hi, cost = cost_cut(dlo, dhi, (slots, costs, got))
     assert lo[0] == 0 and hi[-1] == n and (lo[1:] == hi[:-1]).all() and (hi > lo).all()
     assert set(lo[1:]) == set(edges) | {s for s in cuts if 0 < s < n}
     # whole cycles, summed in another order: within one of the slot sums
@@ -380,7 +382,29 @@ def test_the_runs_end_at_equal_shares_of_the_cost(seed):
         if ends and len(set(cuts)) == len(cuts):
             assert max(ends) == cuts[k - 1]
     # another cut of the slots (the edges not in points): no change
-    assert cost_cut(dlo + (dlo > 0), dhi + (dhi < n), (points, got))[2] is None
+    assert cost_cut(dlo + (dlo > 0), dhi + (dhi < n), (slots, costs, got))[2] is None
+
+
+def test_cost_points_give_each_slot_once_and_cost_cut_each_cut_once():
+    """Empty domains share an edge: ``cost_points`` gives that slot once, at
+    its cost (an empty domain has no cycles); two threads' shares that fall
+    on one slot give one more edge, not two."""
+    dlo = np.array([0, 4, 4, 4], np.int64)
+    dhi = np.array([4, 4, 4, 10], np.int64)
+    slots, costs, cuts = cost_points([6, 0, 0, 6], dlo, dhi, np.zeros(10, np.int64), 2)
+    assert slots.tolist() == [0, 4, 10] and costs.tolist() == [0.0, 6.0, 12.0]
+    assert cuts.tolist() == [4]  # half the cost: an edge already
+    lo, hi, work = cost_cut(dlo, dhi, (slots, costs, cuts))
+    assert lo.tolist() == [0, 4, 4, 4] and hi.tolist() == [4, 4, 4, 10]
+    assert work.tolist() == [6, 0, 0, 6]
+    # one domain of 4 slots weighing 1, 4, 4, 1 (collisions plus one): the
+    # cost is 0.1, 0.5 and 0.9 of the total at slots 1-3, so the ends of
+    # three threads' runs, at 1/3 and 2/3, are both nearest slot 2
+    one = (np.array([0], np.int64), np.array([4], np.int64))
+    slots, costs, cuts = cost_points([10**6], *one, np.array([0, 3, 3, 0]), 3)
+    assert cuts.tolist() == [2, 2]
+    lo, hi, work = cost_cut(*one, (slots, costs, cuts))
+    assert lo.tolist() == [0, 2] and hi.tolist() == [2, 4] and work.tolist() == [500000] * 2
 
 
 def test_home_ranges_tile_the_domains():
@@ -891,9 +915,10 @@ def test_the_runs_end_at_equal_shares_of_the_last_steps_cost(sequential):
                 continue
             dlo, dhi = eng._pool_last
             assert 4 <= len(dlo) <= 5
-            s = c[1][0]
-            assert abs(c[0][s] - c[0][eng.n] / 2) <= min(abs(c[0][x] - c[0][eng.n] / 2)
-                                                         for x in c[0])
+            points = dict(zip(c[0].tolist(), c[1].tolist()))
+            s = int(c[2][0])
+            assert abs(points[s] - points[eng.n] / 2) <= min(abs(points[x] - points[eng.n] / 2)
+                                                             for x in points)
             assert s in set(int(x) for x in dlo) | {eng.n}
             own = claim_masks("runs", len(dlo), 2, None, eng._pool_dwork)[0]
             assert max(int(dhi[d]) for d in range(len(dlo)) if int(own[0]) >> d & 1) == s
