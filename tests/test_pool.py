@@ -669,6 +669,21 @@ def test_pairs_that_break_the_masks_make_the_step_checked(sequential):
     assert eng.pool_checked_steps > eng.repairs
 
 
+def test_pair_buffers_grown_on_the_threads_give_the_sequential_run(sequential):
+    """Pair buffers too small for the step's search: the threads' search
+    counts past them and builds no candidate lists, and the step searches
+    again with larger buffers (``Engine._setup``, ``_search_and_lists``);
+    the run is still the sequential one."""
+    sc, want_hash, want_seq = sequential("dish_marble", "late")
+    eng = pool_engine(sc, 8)
+    eng.pair_cap = 16
+    eng.out_a = np.zeros((2, 16), np.int32)
+    eng.out_e = np.zeros((2, 16), np.int32)
+    eng.nent = np.zeros(2 * 16 * 2, np.int32)
+    steps_match(eng, STEPS["dish_marble"], want_hash, want_seq)
+    assert eng.pair_cap > 16
+
+
 @settings(max_examples=25, deadline=None)
 @given(hs.integers(20, 90), hs.integers(0, 10 ** 6), hs.floats(0.0, 3.0),
        hs.sampled_from([2, 4, 8, 16]), hs.sampled_from([2, 3]), hs.floats(0.3, 1.0))

@@ -419,6 +419,48 @@ def test_claimed_search_lists_do_not_depend_on_the_threads(seed):
     assert np.array_equal(one[4], two[4]) and np.array_equal(one[5], two[5])
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_candidate_lists_by_shares_are_the_one_thread_lists(seed):
+    """``build_csr_share``: thread k of T builds the lists of its slots from
+    every segment; the T shares, run in any order over arrays holding
+    garbage, give the lists a brute-force build gives: each pair once from
+    each end, the mirrored image at the other, in segment order (pairs of a
+    slot with its own image and pairs across the shares' edges included)."""
+    from lockgraph.neighbors import build_csr, build_csr_share
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 60))
+    rows, cap = 3, 40
+    out_a = rng.integers(0, n, (rows, cap)).astype(np.int32)
+    out_e = ((rng.integers(0, n, (rows, cap)) << 5) | rng.integers(0, 27, (rows, cap)))
+    out_e = out_e.astype(np.int32)
+    self_pairs = rng.random((rows, cap)) < 0.1
+    out_e[self_pairs] = (out_a[self_pairs] << 5) | 13
+    nseg = int(rng.integers(0, 12))
+    seg = np.zeros((nseg, 3), np.int64)
+    for q in range(nseg):
+        f = int(rng.integers(0, cap))
+        seg[q] = (rng.integers(0, rows), f, rng.integers(0, cap - f + 1))
+    lists = [[] for _ in range(n)]
+    for p, f, c in seg:
+        for k in range(f, f + c):
+            a, e = int(out_a[p, k]), int(out_e[p, k])
+            lists[a].append(e)
+            lists[e >> 5].append((a << 5) | (26 - (e & 31)))
+    want_off = np.concatenate([[0], np.cumsum([len(x) for x in lists])])
+    want_ent = np.array([e for x in lists for e in x], np.int32)
+    for threads in (1, 2, 3, 4):
+        noff = np.full(n + 1, -7, np.int64)
+        nent = np.full(len(want_ent) + 3, -7, np.int32)
+        for me in rng.permutation(threads):
+            build_csr_share(me, threads, n, seg, nseg, out_a, out_e, noff, nent)
+        assert np.array_equal(noff, want_off)
+        assert np.array_equal(nent[:len(want_ent)], want_ent) and (nent[len(want_ent):] == -7).all()
+    noff = np.full(n + 1, -7, np.int64)
+    nent = np.full(len(want_ent) + 3, -7, np.int32)
+    build_csr(n, seg, nseg, out_a, out_e, noff, nent)
+    assert np.array_equal(noff, want_off) and np.array_equal(nent[:len(want_ent)], want_ent)
+
+
 def test_claimed_search_buffers_and_stack_short():
     """Out of room: the count is still exact (the caller retries with larger
     buffers); a stack too short says so (-1) and stops the other threads."""
