@@ -621,9 +621,12 @@ def _await_task(sync, at, old, rest, spin_cycles, jump_cycles):
 def _await_done(sync, n, gen, wait_cycles, jump_cycles):
     """The caller's wait: True once pool threads 0..n-1 have done task
     generation ``gen``, False if ``wait_cycles`` pass first.  It spins, then
-    yields (the pool threads may need this core), and once a yield took
-    longer than ``jump_cycles`` (the machine is busy) it sleeps between
-    looks instead, leaving the core to the threads it waits for."""
+    yields (the pool threads may need this core), and once a look took
+    longer than ``jump_cycles`` (the machine is busy) and the wait has
+    lasted ten times that, it sleeps between looks instead, leaving the
+    core to the threads it waits for.  (A sleep wakes 0.05-0.1 ms late:
+    slept at once, the ends of a ring step's phases came that late, the
+    host having paused the caller once in the wait.)"""
     c0 = cycles()
     prev = c0
     spins = 0
@@ -645,7 +648,7 @@ def _await_done(sync, n, gen, wait_cycles, jump_cycles):
         spins += 1
         if spins < 256:
             cpu_relax()
-        elif busy:
+        elif busy and now - c0 > 10 * jump_cycles:
             sleep_us(PARK_US)
             prev = cycles()  # the sleep itself is no sign of a busy machine
         else:
@@ -732,15 +735,22 @@ class Workers:
         calm = 0  # waits left without spinning: the machine was seen busy
         while True:
             spin = self._spin if calm == 0 else 0
-            switched = _switches()
             gen = int(_await_task(self._sync, at + W_GEN, last, self._rest, spin, self._jump))
             calm = max(calm - 1, 0)
             tries = 0
-            while gen == -2 and tries < JUMP_TRIES and _switches() == switched:
-                # off its core with no switch in this machine: the virtual
-                # machine's host paused it (ring N = 2e5: 185 of 240 hand-overs
-                # found the thread asleep, 0.1-0.2 ms each, when every such
-                # pause counted as a busy machine); spin on
+            switched = -1
+            while gen == -2 and tries < JUMP_TRIES:
+                # off its core for a while: if not switched out in this machine,
+                # the virtual machine's host paused it (ring N = 2e5: 185 of 240
+                # hand-overs found the thread asleep, 0.1-0.2 ms each, when every
+                # such pause counted as a busy machine); spin on.  The switches
+                # are read at the first pause, not before every wait: inside a
+                # step ``getrusage`` took 12 us (median, ring N = 2e5), on the
+                # way from one task's end to its mark as done
+                now = _switches()
+                if switched >= 0 and now != switched:
+                    break
+                switched = now
                 tries += 1
                 gen = int(_await_task(self._sync, at + W_GEN, last, self._rest, spin,
                                       self._jump))
@@ -761,13 +771,15 @@ class Workers:
                 return
             last = gen
             fn, jobs = self._tasks[k]
+            self._tasks[k] = None  # the next is posted only once these are done
             for i, args in jobs:  # more tasks than threads: several, in order
                 try:
                     self._results[i] = (True, fn(*args))
                 except BaseException as exc:  # reported to the caller by map
                     self.ctrl[ABORT] = 1  # the others stop at their next event
                     self._results[i] = (False, exc)
-            self._tasks[k] = None  # done: marked by the next _await_task
+            # done: marked by the next _await_task, with no Python before it (the
+            # caller waits for the mark)
 
     def wake(self):
         """A step begins: pool threads asleep since the last one wake now and
