@@ -32,7 +32,7 @@ from .atomics import claim_from_ends, fetch_add, load, next_task, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    cost_cut, cost_points, init_domains, pool_start, pool_state, restore_start,
                    two_hop_masks, work_split)
-from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
+from .parallel import (ABORT, INTERIOR, NCTRL, STARTED, AlignedScratch, Workers, cache_aligned,
                        classify_ranges, classify_regions, cycles_per_second, pause_spin)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
@@ -129,12 +129,14 @@ def _finish(pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end, t_sleep, v_
 
 @kernel
 def _finish_claimed(me, nthr, ctl, pos, vel, tl, dt, g, code, wp, omega, drift, slp, t_end,
-                    t_sleep, v_sleep):
+                    t_sleep, v_sleep, ctrl):
     """Thread ``me`` of ``nthr``'s share of the step end (``_finish``):
     chunks of the particles claimed with an atomic fetch-add on ``ctl[0]``
     (0 at the start) until none is left, so that the threads end together
     however late each started; on two threads from the two ends
     (``atomics.claim_from_ends``)."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     n = pos.shape[0]
     nchunks = CHUNKS * nthr
     r = 0
@@ -179,6 +181,8 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     thread idle for a tenth of the phase.  Every chunk is claimed by a call
     that runs to its end, so no particle is left unkicked.  Returns 0, or -1
     if a work stack was short (or ``ctrl`` ABORT was set while waiting)."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     n = pos.shape[0]
     if me == nthr - 1:
         # root and depths as int64 values, never literals: numba compiles a
@@ -281,6 +285,8 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
     nodes.  One call,
     not a phase each: a phase's hand-over to the pool thread and back costs
     0.1-0.2 ms.  Returns 0, or -1 if ``ctrl`` ABORT was set while waiting."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf,
                    anc, start)
     fetch_add(arrived, 0, 1)
@@ -311,6 +317,8 @@ def _search_and_lists(me, nthr, arrived, ctrl, counts, anc, reach, ntop, nbox, n
     ``pair_search_claimed`` (-1: a work stack was short); the lists are not
     built when a count is -1 or over the buffers' room (the caller raises,
     or grows them and searches again), nor when ``ctrl`` ABORT was set."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     c = pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos,
                             out_a[me], out_e[me], stack, work, seg, me, nthr)
     store(counts, me, c)
@@ -719,11 +727,13 @@ class Engine:
         subroots.sort(key=lambda nd: self.ntop[nd, 2])
         return subroots, top
 
-    def _pmap(self, fn, arglist):
-        """Run fn(*args) for each args, on the worker threads when there are some."""
+    def _pmap(self, fn, arglist, signals=False):
+        """Run fn(*args) for each args, on the worker threads when there are
+        some (``signals``: fn sets ``parallel.STARTED`` as the calling thread's
+        share begins, ``Workers.map``)."""
         if self.workers is None or len(arglist) <= 1:
             return [fn(*a) for a in arglist]
-        return self.workers.map(fn, arglist)
+        return self.workers.map(fn, arglist, signals)
 
     def _claimed(self, fn, ntasks, args_of):
         """[fn(*args_of(i, k)) for i in range(ntasks)] on the threads, k being
@@ -835,11 +845,12 @@ class Engine:
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
         ctl = self._scratch.get("finish", (8,), np.int64)
-        self._pmap(_finish_claimed, [
+        ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
+        self._pmap(_finish_claimed, signals=True, arglist=[
             (k, self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
              hill.omega if hill is not None else 0.0, not check_end,
              self.tlast if self.sleeping else NO_SLEEP, self.time, self.par[K.P_TSLEEP],
-             self.par[K.P_VSLEEP]) for k in range(self.threads)])
+             self.par[K.P_VSLEEP], ctrl) for k in range(self.threads)])
         if self.workers is not None:
             self.workers.rest()
         self._accumulate(st)
@@ -903,7 +914,7 @@ class Engine:
         self.steal_ctl[:] = 0
         ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         self._kick = 0.0  # applied now: every chunk is claimed by a call that ends
-        res = self._pmap(_first_phase, [
+        res = self._pmap(_first_phase, signals=True, arglist=[
             (k, t, ctl, ctrl, self.pos, self.vel, self.rad, self.reach, self.par, extra, omega,
              kick, not touching_only, tops, self.tl, self.cis, self.xhead, self.ctr, self.hidden,
              self.perm, self.ntop, self.depth_split, fresh, self.vslots, self.vids, self.stacks,
@@ -940,7 +951,7 @@ class Engine:
             # a pool step's start values, gathered by the permutation itself
             start = (pool_start(n, self._pool_keep, len(self.tlast))
                      if self.schedule == "pool" else NO_START)
-            res = self._pmap(_permute_and_anchor, [
+            res = self._pmap(_permute_and_anchor, signals=True, arglist=[
                 (k, t, claim, arrived, self.workers.ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
                  self.ids, self.reach, tlast, self.perm, self.scratches[k], self.anc, self.ntop,
                  self.subroot_arr, self.nbox, self.nreach, self.order, start) for k in range(t)])
@@ -962,7 +973,7 @@ class Engine:
             self.sclaim[0] = 0
             arrived = self._scratch.get("arrived search", (8,), np.int64)[:1]
             counts = self._scratch.get("pair counts", (t,), np.int64)
-            res = self._pmap(_search_and_lists, [
+            res = self._pmap(_search_and_lists, signals=True, arglist=[
                 (k, t, arrived, ctrl, counts, self.anc, self.reach, self.ntop, self.nbox,
                  self.nreach, self.stasks, nt, self.sclaim, img_pos, self.out_a, self.out_e,
                  self.stack2[k], self.search_work2[k], self.sseg, n, self.noff, self.nent)
@@ -1060,9 +1071,9 @@ class Engine:
                                                     np.int64)
                     masks = self._pool_masks == "start" or (
                         self._pool_masks == "auto" and self.last_events > self.n)
-                    self._pmap(init_domains, [
+                    self._pmap(init_domains, signals=True, arglist=[
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s, adj, masks)
+                         dlo, dhi, dtour_t, dtour_s, adj, masks, self.workers.ctrl)
                         for k in range(self.threads)])
                     if masks:  # the two-hop masks once every one-hop mask is there
                         claim = self._claim_word("masks")

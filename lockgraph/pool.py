@@ -145,7 +145,7 @@ from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_ASKED, S_BLOCKED, S_CL
                       S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, hop2, init_range,
                       journal_room, process_event)
 from .neighbors import LCOUNT
-from .parallel import (ABORT, JITTER, NOWAIT, TIME_EVERY, _fail, _pause, _progress,
+from .parallel import (ABORT, JITTER, NOWAIT, STARTED, TIME_EVERY, _fail, _pause, _progress,
                        cache_aligned, wait_blocked)
 from .predict import INF
 
@@ -273,7 +273,7 @@ def two_hop_masks(me, nthr, claim, hops, sdom, noff, nent, dlo, dhi):
 
 @kernel
 def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, dlo, dhi, dtour_t,
-                 dtour_s, adj, masks):
+                 dtour_s, adj, masks, ctrl):
     """Thread ``me`` of ``nthr``'s share of ``init_domain`` over every domain
     (``rows``, ``dtour_t``, ``dtour_s``: a row each), a domain a task
     (``atomics.claim_from_ends``: on two threads the first from the front,
@@ -282,6 +282,8 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
     mask (then ``two_hop_masks``).  One call a thread, not one a domain: each
     call from Python takes the GIL, and two threads taking it in turn wait
     for each other's wake-up."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     nd = dlo.shape[0]
     r = 0
     while True:
@@ -557,6 +559,8 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     any) and its domain; ``seen``:
     per thread and domain, a queue version and the root then (slot, time);
     ``doms = (dlo, dhi, dtour_t, dtour_s)``.  Returns its final status."""
+    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+        store(ctrl, STARTED, 1)
     ids = parts[7]
     noff, nent, xhead, xent, xnext, ctr = nbrs
     evt, evp, evc, tour_t_, tour_s_, hidden = evq

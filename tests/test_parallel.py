@@ -9,6 +9,7 @@ worker stop the run promptly and reach the caller; a stall is an error.
 """
 import dataclasses
 import os
+import threading
 import time
 
 import numpy as np
@@ -22,7 +23,7 @@ from lockgraph.domains import Dish, PeriodicCube
 from lockgraph.forces import Gravity
 from lockgraph.engine import Engine
 from lockgraph.errors import InputError, SimulationError
-from lockgraph.parallel import ABORT, Workers
+from lockgraph.parallel import ABORT, NCTRL, Workers
 from lockgraph.physics import Physics
 from lockgraph.restitution import CollapseGuard, Constant, VelocityGuard
 from lockgraph.simulation import Simulation
@@ -452,6 +453,41 @@ def test_pool_runs_more_tasks_than_threads_and_sleeps_when_the_step_is_over(monk
     assert not any(th.is_alive() for th in w._pool)
     with pytest.raises(RuntimeError, match="after close"):
         w.map(abs, [(1,)])
+
+
+def test_a_posted_pool_thread_holds_for_the_callers_start_within_a_bound():
+    """``map(..., signals=True)``: a pool thread posted a task returns to
+    Python only once the caller's share has begun (``STARTED``, set by the
+    share itself: the caller then no longer holds the GIL), or after three
+    ``jump_cycles`` without it, so a share that never says so only delays
+    it.  Without ``signals`` (or with ``inline_last`` off: no share runs on
+    the caller) it does not hold."""
+    from lockgraph.parallel import STARTED, W_DONE, W_GEN, W_HOLD, NWSYNC, _await_task
+    ctrl = np.zeros(NCTRL, np.int64)
+    sync = np.zeros(2 * NWSYNC, np.int64)
+    sync[W_GEN] = 5  # posted: generation 5 after 4
+    for hold, started in ((0, 0), (1, 1), (1, 0)):
+        sync[W_HOLD] = hold
+        ctrl[STARTED] = started
+        assert _await_task(sync, W_GEN, 4, NWSYNC, 10**9, 1000, ctrl) == 5
+        assert sync[W_DONE] == 4  # the last task marked done first
+    w = Workers(2)
+    try:
+        ran = threading.Event()
+
+        def task(k):
+            if k == 1:  # the caller's share: never says it began, waits for the other
+                assert ran.wait(5.0), "the pool thread held on for a start never signalled"
+            else:
+                ran.set()
+            return k
+
+        assert w.map(task, [(0,), (1,)], signals=True) == [0, 1]
+        w.inline_last = False
+        ran.clear()
+        assert w.map(lambda k: task(0) + k, [(0,), (1,)], signals=True) == [0, 1]
+    finally:
+        w.close()
 
 
 def test_pool_wait_policy(monkeypatch):
