@@ -38,7 +38,7 @@ from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import BUCKET_BITS, tournament_size
 from .forces import kick_hill
-from .neighbors import JCOUNT, NCTR, build_csr_share
+from .neighbors import JCOUNT, NCTR, build_csr
 from .restitution import CollapseGuard, VelocityGuard
 from .schedule import EventSchedule
 from .state import State
@@ -305,35 +305,16 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
 
 
 @kernel
-def _search_and_lists(me, nthr, arrived, ctrl, counts, anc, reach, ntop, nbox, nreach, tasks,
-                      ntasks, claim, img_pos, out_a, out_e, stack, work, seg, n, noff, nent):
-    """Thread ``me`` of ``nthr``: its share of the pair search
+def _search_share(me, nthr, ctrl, anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos,
+                  out_a, out_e, stack, work, seg):
+    """Thread ``me`` of ``nthr``'s share of the pair search
     (``tree.pair_search_claimed``, into row me of ``out_a``, ``out_e``),
-    then, once every thread's search is done (``arrived``: one word, 0 at
-    the start) and every pair was stored, its share of the candidate lists
-    (``neighbors.build_csr_share``).  One call, not a phase each: the lists
-    on the calling thread alone took 0.37 ms of a ring pool step (N = 2e5),
-    the pool thread idle.  Returns this thread's pair count, as
-    ``pair_search_claimed`` (-1: a work stack was short); the lists are not
-    built when a count is -1 or over the buffers' room (the caller raises,
-    or grows them and searches again), nor when ``ctrl`` ABORT was set."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
+    saying so as it begins when it is the calling thread's (``STARTED``,
+    ``Workers.map``)."""
+    if me == nthr - 1:
         store(ctrl, STARTED, 1)
-    c = pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos,
-                            out_a[me], out_e[me], stack, work, seg, me, nthr)
-    store(counts, me, c)
-    fetch_add(arrived, 0, 1)
-    spins = 0
-    while load(arrived, 0) < nthr:
-        if load(ctrl, ABORT) != 0:
-            return c
-        spins = pause_spin(spins)
-    for k in range(nthr):
-        x = load(counts, k)
-        if x < 0 or x > out_a.shape[1]:
-            return c
-    build_csr_share(me, nthr, n, seg, ntasks, out_a, out_e, noff, nent)
-    return c
+    return pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos,
+                               out_a[me], out_e[me], stack, work, seg, me, nthr)
 
 
 class _Option:
@@ -971,13 +952,10 @@ class Engine:
         ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         while True:
             self.sclaim[0] = 0
-            arrived = self._scratch.get("arrived search", (8,), np.int64)[:1]
-            counts = self._scratch.get("pair counts", (t,), np.int64)
-            res = self._pmap(_search_and_lists, signals=True, arglist=[
-                (k, t, arrived, ctrl, counts, self.anc, self.reach, self.ntop, self.nbox,
-                 self.nreach, self.stasks, nt, self.sclaim, img_pos, self.out_a, self.out_e,
-                 self.stack2[k], self.search_work2[k], self.sseg, n, self.noff, self.nent)
-                for k in range(t)])
+            res = self._pmap(_search_share, signals=True, arglist=[
+                (k, t, ctrl, self.anc, self.reach, self.ntop, self.nbox, self.nreach,
+                 self.stasks, nt, self.sclaim, img_pos, self.out_a, self.out_e, self.stack2[k],
+                 self.search_work2[k], self.sseg) for k in range(t)])
             if min(res) < 0:
                 raise SimulationError("pair search deeper than its work stack")
             self.npairs_part[:] = res
@@ -990,6 +968,7 @@ class Engine:
         self.npairs = int(self.npairs_part.sum())
         self.search_visits += self.search_work2[:, 0].sum()
         self.search_tests += self.search_work2[:, 1].sum()
+        build_csr(n, self.sseg, nt, self.out_a, self.out_e, self.noff, self.nent)
 
     def _permute(self):
         """Apply the storage permutation ``perm`` to every per-particle array

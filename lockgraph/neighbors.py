@@ -27,44 +27,22 @@ def build_csr(n, seg, nseg, out_a, out_e, noff, nent):
     """Symmetric CSR lists from the pair search's output, read in segments:
     segment q is ``out_a[p, f:f + c]``, ``out_e[p, f:f + c]`` with ``(p, f,
     c) = seg[q]``, q = 0..nseg-1 (``tree.pair_search_claimed``'s tasks).
-    Each list holds its entries in segment order."""
-    build_csr_share(0, 1, n, seg, nseg, out_a, out_e, noff, nent)
-
-
-@kernel
-def build_csr_share(me, nthr, n, seg, nseg, out_a, out_e, noff, nent):
-    """Thread ``me`` of ``nthr``'s share of ``build_csr``: the lists of
-    slots n me / nthr .. n (me + 1) / nthr - 1, their offsets
-    ``noff[lo + 1 .. hi]`` (and ``noff[0]`` on thread 0) and their entries.
-    Each thread reads every pair, in segment order, and keeps the ends in
-    its slots (and counts those before them: where its entries begin), so
-    the shares write apart and need no barrier, and every list is the
-    same as on one thread.  A slot's offset serves as its cursor while its
-    list is filled (counts in ``noff[i + 1]``, turned into starts, each
-    left at its list's end: the next one's start), so no pass shifts them
-    back."""
-    lo = n * me // nthr
-    hi = n * (me + 1) // nthr
-    if me == 0:
-        noff[0] = 0
-    for i in range(lo, hi):
+    Each list holds its entries in segment order.  A slot's offset serves
+    as its cursor while its list is filled (the counts in ``noff[i + 1]``,
+    turned into starts, each left at its list's end: the next one's start),
+    so no pass shifts them back.  (Built on both threads, each the lists of
+    its half of the slots after a barrier in the pair search's call, it
+    measured no faster: README, Benchmarks.)"""
+    noff[0] = 0
+    for i in range(n):
         noff[i + 1] = 0
-    base = 0
     for q in range(nseg):
         p = seg[q, 0]
         for k in range(seg[q, 1], seg[q, 1] + seg[q, 2]):
-            a = out_a[p, k]
-            b = out_e[p, k] >> 5
-            if a < lo:
-                base += 1
-            elif a < hi:
-                noff[a + 1] += 1
-            if b < lo:
-                base += 1
-            elif b < hi:
-                noff[b + 1] += 1
-    run = base
-    for i in range(lo, hi):
+            noff[out_a[p, k] + 1] += 1
+            noff[(out_e[p, k] >> 5) + 1] += 1
+    run = 0
+    for i in range(n):
         c = noff[i + 1]
         noff[i + 1] = run
         run += c
@@ -74,12 +52,10 @@ def build_csr_share(me, nthr, n, seg, nseg, out_a, out_e, noff, nent):
             a = out_a[p, k]
             e = out_e[p, k]
             b = e >> 5
-            if lo <= a < hi:
-                nent[noff[a + 1]] = e
-                noff[a + 1] += 1
-            if lo <= b < hi:
-                nent[noff[b + 1]] = (a << 5) | (26 - (e & 31))
-                noff[b + 1] += 1
+            nent[noff[a + 1]] = e
+            noff[a + 1] += 1
+            nent[noff[b + 1]] = (a << 5) | (26 - (e & 31))
+            noff[b + 1] += 1
 
 
 @kernel

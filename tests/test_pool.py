@@ -671,9 +671,8 @@ def test_pairs_that_break_the_masks_make_the_step_checked(sequential):
 
 def test_pair_buffers_grown_on_the_threads_give_the_sequential_run(sequential):
     """Pair buffers too small for the step's search: the threads' search
-    counts past them and builds no candidate lists, and the step searches
-    again with larger buffers (``Engine._setup``, ``_search_and_lists``);
-    the run is still the sequential one."""
+    counts past them, and the step searches again with larger buffers
+    (``Engine._setup``); the run is still the sequential one."""
     sc, want_hash, want_seq = sequential("dish_marble", "late")
     eng = pool_engine(sc, 8)
     eng.pair_cap = 16
