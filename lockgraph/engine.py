@@ -949,7 +949,6 @@ class Engine:
             self.sseg = np.zeros_like(self.stasks)
         if nt < 0:
             raise SimulationError("pair search deeper than its work stack")
-        ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         while True:
             self.sclaim[0] = 0
             res = self._pmap(_search_share, signals=True, arglist=[
