@@ -32,8 +32,9 @@ from .atomics import claim_from_ends, fetch_add, load, next_task, store
 from .pool import (MAX_DOMAINS, NPCTL, PCHECKED, PCYC, PHIGH, REDO_WINDOW, claim_masks,
                    cost_cut, cost_points, init_domains, pool_start, pool_state, restore_start,
                    two_hop_masks, work_split)
-from .parallel import (ABORT, INTERIOR, NCTRL, STARTED, AlignedScratch, Workers, cache_aligned,
-                       classify_ranges, classify_regions, cycles_per_second, pause_spin)
+from .parallel import (ABORT, INTERIOR, NCTRL, AlignedScratch, Workers, cache_aligned,
+                       classify_ranges, classify_regions, cycles_per_second, pause_spin,
+                       say_started)
 from .domains import DOMAIN_DISH, wrap
 from .errors import InelasticCollapseError, InputError, SimulationError, StepTooLargeError
 from .events import BUCKET_BITS, tournament_size
@@ -135,8 +136,7 @@ def _finish_claimed(me, nthr, ctl, pos, vel, tl, dt, g, code, wp, omega, drift, 
     (0 at the start) until none is left, so that the threads end together
     however late each started; on two threads from the two ends
     (``atomics.claim_from_ends``)."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     n = pos.shape[0]
     nchunks = CHUNKS * nthr
     r = 0
@@ -181,8 +181,7 @@ def _first_phase(me, nthr, ctl, ctrl, pos, vel, rad, reach, par, extra, omega, h
     thread idle for a tenth of the phase.  Every chunk is claimed by a call
     that runs to its end, so no particle is left unkicked.  Returns 0, or -1
     if a work stack was short (or ``ctrl`` ABORT was set while waiting)."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     n = pos.shape[0]
     if me == nthr - 1:
         # root and depths as int64 values, never literals: numba compiles a
@@ -285,8 +284,7 @@ def _permute_and_anchor(me, nthr, claim, arrived, ctrl, pos, vel, rad, mass, nco
     nodes.  One call,
     not a phase each: a phase's hand-over to the pool thread and back costs
     0.1-0.2 ms.  Returns 0, or -1 if ``ctrl`` ABORT was set while waiting."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     _permute_share(me, nthr, claim, pos, vel, rad, mass, ncoll, ids, reach, tlast, perm, buf,
                    anc, start)
     fetch_add(arrived, 0, 1)
@@ -311,8 +309,7 @@ def _search_share(me, nthr, ctrl, anc, reach, ntop, nbox, nreach, tasks, ntasks,
     (``tree.pair_search_claimed``, into row me of ``out_a``, ``out_e``),
     saying so as it begins when it is the calling thread's (``STARTED``,
     ``Workers.map``)."""
-    if me == nthr - 1:
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     return pair_search_claimed(anc, reach, ntop, nbox, nreach, tasks, ntasks, claim, img_pos,
                                out_a[me], out_e[me], stack, work, seg, me, nthr)
 
@@ -509,6 +506,8 @@ class Engine:
             raise InputError("window_events", f"must be a number > 0, got {window_events!r}")
         self.workers = (Workers(self.threads, window_events, stall_seconds)
                         if self.threads > 1 else None)
+        # the phase kernels' control words: the workers', or words of their own on one thread
+        self._ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         self.last_events = 0.0
         self.repairs = 0
         self.repairs_on_threads = 0  # of those, redone on the threads (``pool_redo``)
@@ -826,12 +825,11 @@ class Engine:
         self.time += self.dt
         wp = ph.domain.wrap_params(self.time)
         ctl = self._scratch.get("finish", (8,), np.int64)
-        ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
         self._pmap(_finish_claimed, signals=True, arglist=[
             (k, self.threads, ctl, self.pos, self.vel, self.tl, self.dt, ph.g, ph.domain.code, wp,
              hill.omega if hill is not None else 0.0, not check_end,
              self.tlast if self.sleeping else NO_SLEEP, self.time, self.par[K.P_TSLEEP],
-             self.par[K.P_VSLEEP], ctrl) for k in range(self.threads)])
+             self.par[K.P_VSLEEP], self._ctrl) for k in range(self.threads)])
         if self.workers is not None:
             self.workers.rest()
         self._accumulate(st)
@@ -893,7 +891,7 @@ class Engine:
         ctl = self._scratch.get("first", (NFIRST,), np.int64)
         tops = np.zeros((t, 2))
         self.steal_ctl[:] = 0
-        ctrl = self.workers.ctrl if self.workers is not None else np.zeros(NCTRL, np.int64)
+        ctrl = self._ctrl
         self._kick = 0.0  # applied now: every chunk is claimed by a call that ends
         res = self._pmap(_first_phase, signals=True, arglist=[
             (k, t, ctl, ctrl, self.pos, self.vel, self.rad, self.reach, self.par, extra, omega,
@@ -933,7 +931,7 @@ class Engine:
             start = (pool_start(n, self._pool_keep, len(self.tlast))
                      if self.schedule == "pool" else NO_START)
             res = self._pmap(_permute_and_anchor, signals=True, arglist=[
-                (k, t, claim, arrived, self.workers.ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
+                (k, t, claim, arrived, ctrl, self.pos, self.vel, self.rad, self.mass, self.ncoll,
                  self.ids, self.reach, tlast, self.perm, self.scratches[k], self.anc, self.ntop,
                  self.subroot_arr, self.nbox, self.nreach, self.order, start) for k in range(t)])
             assert min(res) == 0  # ABORT is set only by a raise, which map raises
@@ -1051,7 +1049,7 @@ class Engine:
                         self._pool_masks == "auto" and self.last_events > self.n)
                     self._pmap(init_domains, signals=True, arglist=[
                         (k, self.threads, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows,
-                         dlo, dhi, dtour_t, dtour_s, adj, masks, self.workers.ctrl)
+                         dlo, dhi, dtour_t, dtour_s, adj, masks, self._ctrl)
                         for k in range(self.threads)])
                     if masks:  # the two-hop masks once every one-hop mask is there
                         claim = self._claim_word("masks")

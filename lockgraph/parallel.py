@@ -593,6 +593,15 @@ def pause_spin(spins):
     return spins + 1
 
 
+@kernel(inline=True)
+def say_started(ctrl, me, nthr):
+    """At the start of a phase kernel's share: on its last thread, the one
+    ``Workers.map`` runs on the calling thread, set ``ctrl[STARTED]`` (the
+    caller has let the GIL go: ``_await_task``)."""
+    if me == nthr - 1:
+        store(ctrl, STARTED, 1)
+
+
 @kernel
 def _await_task(sync, at, old, rest, spin_cycles, jump_cycles, ctrl):
     """A pool thread's wait for its next task: spin on ``sync[at]`` until it

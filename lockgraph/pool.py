@@ -145,8 +145,8 @@ from .kernels import (NEED_JOURNAL, NEED_LOG, OK, P_DT, S_ASKED, S_BLOCKED, S_CL
                       S_REACHOUT, S_VIOL, S_WAIT, STALL, VIOLATION, hop2, init_range,
                       journal_room, process_event)
 from .neighbors import LCOUNT
-from .parallel import (ABORT, JITTER, NOWAIT, STARTED, TIME_EVERY, _fail, _pause, _progress,
-                       cache_aligned, wait_blocked)
+from .parallel import (ABORT, JITTER, NOWAIT, TIME_EVERY, _fail, _pause, _progress,
+                       cache_aligned, say_started, wait_blocked)
 from .predict import INF
 
 MAX_DOMAINS = 63  # bits of an int64 mask
@@ -282,8 +282,7 @@ def init_domains(me, nthr, claim, sdom, wt, hops, parts, nbrs, evq, cfg, rows, d
     mask (then ``two_hop_masks``).  One call a thread, not one a domain: each
     call from Python takes the GIL, and two threads taking it in turn wait
     for each other's wake-up."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     nd = dlo.shape[0]
     r = 0
     while True:
@@ -559,8 +558,7 @@ def pool_worker(me, nthr, parts, step, tree, nbrs, evq, jour, cfg, st, locks, ps
     any) and its domain; ``seen``:
     per thread and domain, a queue version and the root then (slot, time);
     ``doms = (dlo, dhi, dtour_t, dtour_s)``.  Returns its final status."""
-    if me == nthr - 1:  # the calling thread's share (``Workers.map``)
-        store(ctrl, STARTED, 1)
+    say_started(ctrl, me, nthr)
     ids = parts[7]
     noff, nent, xhead, xent, xnext, ctr = nbrs
     evt, evp, evc, tour_t_, tour_s_, hidden = evq
@@ -1121,20 +1119,21 @@ def cost_cut(dlo, dhi, cost):
     than the last step's).  In a kernel (``_cost_cut``): in Python 0.07 ms
     of a ring pool step."""
     slots, costs, cuts = cost
-    out = np.empty((3, len(dlo) + len(cuts)), np.int64)
-    m = _cost_cut(dlo, dhi, slots, costs, cuts, out[0], out[1], out[2])
+    out = np.empty((4, len(dlo) + len(cuts)), np.int64)
+    m = _cost_cut(dlo, dhi, slots, costs, cuts, out[0], out[1], out[2], out[3])
     if m < 0:
         return dlo, dhi, None
     return out[0, :m], out[1, :m], out[2, :m]
 
 
 @kernel
-def _cost_cut(dlo, dhi, slots, costs, cuts, lo, hi, work):
+def _cost_cut(dlo, dhi, slots, costs, given, lo, hi, work, cuts):
     """``cost_cut`` into lo, hi, work; the domains' count, or -1 when an
-    edge has no cost.  The cuts are taken in slot order, each once (sorted
-    in place: ``cost_points`` gives them in order already)."""
-    for k in range(1, cuts.shape[0]):
-        x = cuts[k]
+    edge has no cost.  The cuts ``given`` are taken in slot order, each
+    once, sorted into ``cuts`` (scratch; ``cost_points`` gives them in
+    order already)."""
+    for k in range(given.shape[0]):
+        x = given[k]
         r = k
         while r > 0 and cuts[r - 1] > x:
             cuts[r] = cuts[r - 1]
@@ -1144,7 +1143,7 @@ def _cost_cut(dlo, dhi, slots, costs, cuts, lo, hi, work):
     for q in range(m):
         lo[q] = dlo[q]
         hi[q] = dhi[q]
-    for k in range(cuts.shape[0]):
+    for k in range(given.shape[0]):
         s = cuts[k]
         if k > 0 and s == cuts[k - 1]:
             continue
