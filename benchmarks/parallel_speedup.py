@@ -50,6 +50,19 @@ just before the 2-thread engine's step (``host_probe.near``: below
 every few minutes, and the pool's events cost far more at the long one),
 apart from the steps whose probe the host paused (a round trip of
 ``LATE_NS``, 700 ns, or more: ``host_probe.far``).
+The probes are loops of their own, a few ms each; since 2026-12-07 each
+round of steps also measures the host's *ceiling* on the engine's own work
+(``host_ceiling``; ``--ceiling halves|copies|none``, by default halves, or
+copies under gravity): two sequential engines on the two halves of the
+state (cut at the median x; under gravity, where a half's grains would flow
+out through the cut, on two copies of the whole: twice the memory, so a
+low ceiling where the work is bound by memory),
+stepped one after the other and then at once on two threads, with nothing
+shared between them.
+Its ratio is what two cores of the host gave this work with no coordination
+cost, in the same minute as the engines' steps; ``over the ceiling`` is a
+threaded engine's paired speedup divided by it, step by step (1: the
+engine got all the host gave).
 The JSON (``--out``) holds every step's time, phases and CPU time besides.
 
 ``--locks graph:4:auto`` (among the defaults) runs the threaded engine with
@@ -113,6 +126,7 @@ from lockgraph import scenarios  # noqa: E402
 from lockgraph.engine import Engine  # noqa: E402
 from lockgraph.simulation import compile_kernels  # noqa: E402
 
+from host_ceiling import HostCeiling  # noqa: E402
 from host_probe import FAR_NS, LATE_NS, TWO_CORES, TwoCoreProbe, clear, far, near  # noqa: E402
 
 CASES = {"ring": ("ring", "early", 200000, 50000),
@@ -278,6 +292,23 @@ def _paired_where(seq, mine, seq_ok, my_ok):
     return statistics.median(r) if r else float("nan")
 
 
+def _ceiling_result(ceil, alone, once, each, steps):
+    """The host ceiling's record (``host_ceiling``), or None when not run."""
+    if ceil is None:
+        return None
+    walls_alone = [sum(alone[i:i + steps]) / steps for i in range(0, len(alone), steps)]
+    walls_once = [sum(once[i:i + steps]) / steps for i in range(0, len(once), steps)]
+    return {"split": ceil.split, "counts": ceil.counts, "alone_s": alone, "at_once_s": once,
+            "halves_s": [[list(a), list(b)] for a, b in each],
+            "speedup_best": min(walls_alone) / min(walls_once),
+            "speedup_paired": statistics.median(a / b for a, b in zip(alone, once)),
+            # each half's rate at once over its rate alone, summed: what a program
+            # that balanced its two threads' work perfectly could get (the halves'
+            # unequal work, and a core the host slowed, left to the balancing)
+            "balanced_paired": statistics.median(a[0] / b[0] + a[1] / b[1] for a, b in each),
+            "identical": ceil.identical()}
+
+
 def load_case(name, n, bed_code="lammps", bed_steps=100, bed_ranks=2):
     """A case's starting point: a scene-like namespace (state, physics, dt)."""
     scene, state = CASES[name][:2]
@@ -290,7 +321,7 @@ def load_case(name, n, bed_code="lammps", bed_steps=100, bed_ranks=2):
 
 
 def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", bed_steps=100,
-             bed_ranks=2):
+             bed_ranks=2, ceiling="auto"):
     sc = load_case(name, n, bed_code, bed_steps, bed_ranks)
     engines = {"sequential": Engine(sc.state, sc.physics, sc.dt)}
     for kind, scale, merge, schedule in locks:
@@ -310,8 +341,19 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         engines[label] = Engine(sc.state, sc.physics, sc.dt, threads=2, lock=kind,
                                 scale=scale, policy="exact", schedule=schedule)
         engines[label].merge_far = merge
-    closing = []  # the host probe, once made
+    closing = []  # the host probe and the ceiling, once made
     try:
+        # what two cores of the host give this work with no coordination at
+        # all, measured in the same rounds as the engines (host_ceiling)
+        # (halves of the state; copies of it under gravity, where a half's
+        # grains would flow out through the cut)
+        split = ("copies" if sc.physics.g != 0.0 else "halves") if ceiling == "auto" else ceiling
+        ceil = HostCeiling(sc.state, sc.physics, sc.dt, split) if split != "none" else None
+        if ceil is not None:
+            closing.append(ceil)
+            ceil.alone()
+            ceil.at_once()
+        c_alone, c_once, c_each = [], [], []
         for eng in engines.values():
             eng.step()
         base = {k: e.totals.copy() for k, e in engines.items()}
@@ -347,10 +389,19 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                     ph1 = eng.phase_seconds
                     for k, v in phases[label].items():
                         v.append(ph1[k] - ph0[k])
+                if ceil is not None:  # its two halves: one after the other, then at once
+                    each, _ = ceil.alone()
+                    c_alone.append(sum(each))
+                    both, wall = ceil.at_once()
+                    c_once.append(wall)
+                    c_each.append((each, both))
             for label in engines:
                 walls[label].append(sum(per_step[label][-steps:]) / steps)
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
-                f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items()))
+                f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items())
+                + (f"; the halves one after the other {sum(c_alone[-steps:]) / steps * 1e3:.0f}, "
+                   f"at once {sum(c_once[-steps:]) / steps * 1e3:.0f} ms/step"
+                   if ceil is not None else ""))
         ref = engines["sequential"].state().sha256()
         # per engine, per timed step: did the probe just before it find two full cores?
         clear_at = {k: [clear(p) for p in probes[i::len(engines)]]
@@ -363,7 +414,9 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         seq = walls["sequential"]
         out = {"scene": scene, "state": state, "n": int(sc.state.n), "dt": float(sc.dt),
                "steps": steps, "repeats": repeats, "runs": {},
-               "host_two_core_probes": probes}
+               "host_two_core_probes": probes,
+               "ceiling": _ceiling_result(ceil, c_alone, c_once, c_each, steps)}
+        ceil_step = [a / b for a, b in zip(c_alone, c_once)]
         for label, eng in engines.items():
             d = eng.totals - base[label]
             ratios = [a / b for a, b in zip(seq, walls[label])]
@@ -383,6 +436,11 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 # same work for every engine: a paired ratio, robust to a noisy minute
                 "speedup_paired": statistics.median(
                     a / b for a, b in zip(per_step["sequential"], per_step[label])),
+                # the same step by step over the host's ceiling measured in the
+                # same round (1: the engine got all two cores gave then)
+                "over_ceiling_paired": statistics.median(
+                    a / b / c for a, b, c in zip(per_step["sequential"], per_step[label],
+                                                 ceil_step)) if ceil_step else float("nan"),
                 # the same by phase: the search (tree, pair search: data-parallel,
                 # so its ratio is what this machine gives two threads at the time)
                 # and the events (first predictions, queues, events: the schedule's)
@@ -477,6 +535,14 @@ def print_case(name, res):
           f"{TWO_CORES} (two full cores) in {sum(1 for x in pr if clear(x))} of {len(pr)}; "
           f"a cache line's round trip between the threads: median "
           f"{statistics.median(x[3] for x in pr):.0f} ns")
+    c = res.get("ceiling")
+    if c is not None:
+        parts = "halves" if c["split"] == "halves" else "copies"
+        print(f"  the host's ceiling (host_ceiling: two sequential engines on {parts} of "
+              f"{c['counts'][0]} and {c['counts'][1]} particles, at once on two threads against "
+              f"one after the other, in the same rounds): best over best "
+              f"{c['speedup_best']:.2f}x, paired median {c['speedup_paired']:.2f}x "
+              f"(balanced {c['balanced_paired']:.2f}x); both pairs identical: {c['identical']}")
 
 
 def main():
@@ -489,6 +555,10 @@ def main():
                     help="graph:SCALE[:unmerged|:auto], grid, grid3d, pool:K[:home|:earliest], ... "
                          "(graph:1.2,graph:4,graph:16,grid,graph:4:auto,pool:8)")
     ap.add_argument("--out", help="write the results as JSON")
+    ap.add_argument("--ceiling", default="auto", choices=("auto", "halves", "copies", "none"),
+                    help="the host's ceiling (host_ceiling: two sequential engines on two parts "
+                         "of the state, at once and one after the other): on halves, on copies "
+                         "of the whole, none, or auto (copies under gravity, else halves)")
     args = ap.parse_args()
     locks = parse_locks(args.locks)
     names, sizes = parse_cases(ap, args.cases, args.n, args.quick)
@@ -498,7 +568,7 @@ def main():
     for c in names:
         scene, state, _, _ = CASES[c]
         results[c] = run_case(c, scene, state, sizes[c], args.steps, args.repeats, locks,
-                              args.bed_code, args.bed_steps, args.bed_ranks)
+                              args.bed_code, args.bed_steps, args.bed_ranks, args.ceiling)
         print_case(c, results[c])
     print(f"\nTarget: 2-thread speedup >= {TARGET} (exact policy).")
     for c, res in results.items():
@@ -512,6 +582,13 @@ def main():
               f"cores used, the host's steal {100 * best[1]['steal_share']:.1f} % in "
               f"{best[1]['stolen_steps']} of its steps); all identical: "
               f"{all(r['identical'] for r in res['runs'].values())}")
+        c = res.get("ceiling")
+        if c is not None:
+            print(f"    the host's ceiling in the same rounds (two engines on {c['split']}, no "
+                  f"coordination): best over best {c['speedup_best']:.2f}x "
+                  f"({c['speedup_best'] / TARGET:.2f} of the target), paired median "
+                  f"{c['speedup_paired']:.2f}x; {best[0]} paired, step by step over the "
+                  f"ceiling: {best[1]['over_ceiling_paired']:.2f}")
         clr = _best_over(res, "speedup_paired_clear", "clear_steps")
         print(f"    over the steps the host left two full cores (host_probe.clear before "
               f"both engines' steps): {clr[0]} paired median "
