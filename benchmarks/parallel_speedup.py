@@ -56,10 +56,9 @@ round of steps also measures the host's *ceiling* on the engine's own work
 copies under gravity): two sequential engines on the two halves of the
 state (cut at the median x; under gravity, where a half's grains would flow
 out through the cut, on two copies of the whole: twice the memory, so a
-low ceiling where the work is bound by memory),
-stepped one after the other and then at once on two threads, with nothing
-shared between them.
-Its ratio is what two cores of the host gave this work with no coordination
+low ceiling where the work is bound by memory), stepped one after the other
+and then at once on two threads, with nothing shared between them.  Its
+ratio is what two cores of the host gave this work with no coordination
 cost, in the same minute as the engines' steps; ``over the ceiling`` is a
 threaded engine's paired speedup divided by it, step by step (1: the
 engine got all the host gave).
@@ -299,11 +298,11 @@ def _ceiling_result(ceil, alone, once, each, steps):
     walls_alone = [sum(alone[i:i + steps]) / steps for i in range(0, len(alone), steps)]
     walls_once = [sum(once[i:i + steps]) / steps for i in range(0, len(once), steps)]
     return {"split": ceil.split, "counts": ceil.counts, "alone_s": alone, "at_once_s": once,
-            "halves_s": [[list(a), list(b)] for a, b in each],
+            "parts_s": [[list(a), list(b)] for a, b in each],
             "speedup_best": min(walls_alone) / min(walls_once),
             "speedup_paired": statistics.median(a / b for a, b in zip(alone, once)),
-            # each half's rate at once over its rate alone, summed: what a program
-            # that balanced its two threads' work perfectly could get (the halves'
+            # each part's rate at once over its rate alone, summed: what a program
+            # that balanced its two threads' work perfectly could get (the parts'
             # unequal work, and a core the host slowed, left to the balancing)
             "balanced_paired": statistics.median(a[0] / b[0] + a[1] / b[1] for a, b in each),
             "identical": ceil.identical()}
@@ -389,7 +388,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                     ph1 = eng.phase_seconds
                     for k, v in phases[label].items():
                         v.append(ph1[k] - ph0[k])
-                if ceil is not None:  # its two halves: one after the other, then at once
+                if ceil is not None:  # its two parts: one after the other, then at once
                     each, _ = ceil.alone()
                     c_alone.append(sum(each))
                     both, wall = ceil.at_once()
@@ -399,7 +398,8 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                 walls[label].append(sum(per_step[label][-steps:]) / steps)
             say(f"{name}: repeat {r + 1}/{repeats}: " + ", ".join(
                 f"{k} {v[-1] * 1e3:.0f} ms/step" for k, v in walls.items())
-                + (f"; the halves one after the other {sum(c_alone[-steps:]) / steps * 1e3:.0f}, "
+                + (f"; the {ceil.split} one after the other "
+                   f"{sum(c_alone[-steps:]) / steps * 1e3:.0f}, "
                    f"at once {sum(c_once[-steps:]) / steps * 1e3:.0f} ms/step"
                    if ceil is not None else ""))
         ref = engines["sequential"].state().sha256()
