@@ -113,7 +113,9 @@ class HostCeiling:
     """Four sequential engines on two parts of a state (``split``: "halves"
     or "copies"): ``alone()`` steps one pair one part after the other,
     ``at_once()`` the other pair both parts at once on two threads; each
-    returns the two parts' step times (s) and the wall time of the call (s)."""
+    returns the two parts' step times (s) and the wall time of the call (s),
+    and appends the parts' ``Engine.phase_seconds`` of that step (a dict of
+    two-item lists, s) to ``phases_alone`` or ``phases_at_once``."""
 
     def __init__(self, state, physics, dt, split="halves", axis=0):
         if split not in SPLITS:
@@ -124,18 +126,30 @@ class HostCeiling:
         self._alone = [Engine(p, physics, dt) for p in parts]
         self._once = [Engine(p, physics, dt) for p in parts]
         self._partner = _Partner()
+        self.phases_alone, self.phases_at_once = [], []
+
+    @staticmethod
+    def _phases(engs, before):
+        after = [e.phase_seconds for e in engs]
+        return {k: [a[k] - b[k] for a, b in zip(after, before)] for k in after[0]}
 
     def alone(self):
+        before = [e.phase_seconds for e in self._alone]
         t0 = time.perf_counter()
         times = [_timed_step(e) for e in self._alone]
-        return times, time.perf_counter() - t0
+        wall = time.perf_counter() - t0
+        self.phases_alone.append(self._phases(self._alone, before))
+        return times, wall
 
     def at_once(self):
+        before = [e.phase_seconds for e in self._once]
         t0 = time.perf_counter()
         self._partner.submit(lambda: _timed_step(self._once[1]))
         mine = _timed_step(self._once[0])
         other = self._partner.result()
-        return [mine, other], time.perf_counter() - t0
+        wall = time.perf_counter() - t0
+        self.phases_at_once.append(self._phases(self._once, before))
+        return [mine, other], wall
 
     def identical(self):
         """Did both pairs reach the same states (the same work was timed)?"""

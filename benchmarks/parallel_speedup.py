@@ -305,6 +305,13 @@ def _ceiling_result(ceil, alone, once, each, steps):
             # that balanced its two threads' work perfectly could get (the parts'
             # unequal work, and a core the host slowed, left to the balancing)
             "balanced_paired": statistics.median(a[0] / b[0] + a[1] / b[1] for a, b in each),
+            # by phase (``Engine.phase_seconds``): the parts' time alone over their
+            # mean time at once (the two parts' phases do not run at the same
+            # moments, so not over the longer one), median of the steps
+            "phase_paired": {k: statistics.median(
+                2.0 * sum(a[k]) / sum(b[k]) for a, b in zip(ceil.phases_alone,
+                                                             ceil.phases_at_once)
+                if sum(b[k]) > 0) for k in ("search", "events")},
             "identical": ceil.identical()}
 
 
@@ -352,6 +359,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
             closing.append(ceil)
             ceil.alone()
             ceil.at_once()
+            del ceil.phases_alone[:], ceil.phases_at_once[:]  # untimed, as the engines'
         c_alone, c_once, c_each = [], [], []
         for eng in engines.values():
             eng.step()
@@ -588,7 +596,11 @@ def main():
                   f"coordination): best over best {c['speedup_best']:.2f}x "
                   f"({c['speedup_best'] / TARGET:.2f} of the target), paired median "
                   f"{c['speedup_paired']:.2f}x; {best[0]} paired, step by step over the "
-                  f"ceiling: {best[1]['over_ceiling_paired']:.2f}"
+                  f"ceiling: {best[1]['over_ceiling_paired']:.2f}; by phase, the ceiling's "
+                  f"search {c['phase_paired']['search']:.2f}x and events "
+                  f"{c['phase_paired']['events']:.2f}x against the engine's "
+                  f"{best[1]['phase_speedup_paired']['search']:.2f}x and "
+                  f"{best[1]['phase_speedup_paired']['events']:.2f}x"
                   + ("; the ceiling itself below the target: in this run the host gave "
                      "two threads of this work less than the target"
                      if c["speedup_best"] < TARGET else ""))

@@ -53,6 +53,12 @@ class TestCeiling:
                 both, wall = c.at_once()
                 assert len(both) == 2 and wall >= max(both) > 0.0
             assert c.identical()
+            # and each step's phases, by part: parts of the step's own time
+            for rec, times in ((c.phases_alone, each), (c.phases_at_once, both)):
+                assert len(rec) == 3
+                assert set(rec[-1]) == {"search", "events", "other", "step"}
+                for k in ("search", "events"):
+                    assert all(0.0 < x <= t for x, t in zip(rec[-1][k], times))
         finally:
             c.close()
 
