@@ -37,8 +37,8 @@ The parts (``split``):
 ``benchmarks/event_ceiling.py`` asks the same of the events phase alone,
 over whole runs.
 """
-import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -57,47 +57,6 @@ def halves(state, axis=0):
     order = np.argsort(state.pos[:, axis], kind="stable")
     cut = state.n // 2
     return [half(state, np.sort(order[:cut])), half(state, np.sort(order[cut:]))]
-
-
-class _Partner:
-    """One long-lived thread that runs the callables it is given, one at a time
-    (a thread started per step would add its start-up to every timing)."""
-
-    def __init__(self):
-        self._go = threading.Semaphore(0)
-        self._done = threading.Semaphore(0)
-        self._job = None
-        self._out = None
-        self._thread = threading.Thread(target=self._loop, daemon=True)
-        self._thread.start()
-
-    def _loop(self):
-        while True:
-            self._go.acquire()
-            job = self._job
-            if job is None:
-                return
-            try:
-                self._out = job()
-            except BaseException as exc:  # raised in the caller by result()
-                self._out = exc
-            self._done.release()
-
-    def submit(self, job):
-        self._job = job
-        self._go.release()
-
-    def result(self):
-        self._done.acquire()
-        out = self._out
-        if isinstance(out, BaseException):
-            raise out
-        return out
-
-    def close(self):
-        self._job = None
-        self._go.release()
-        self._thread.join()
 
 
 def _timed_step(eng):
@@ -125,8 +84,18 @@ class HostCeiling:
         self.counts = [p.n for p in parts]
         self._alone = [Engine(p, physics, dt) for p in parts]
         self._once = [Engine(p, physics, dt) for p in parts]
-        self._partner = _Partner()
+        # one long-lived second thread (one started per step would add its
+        # start-up to every timing), as host_probe's
+        self._partner = ThreadPoolExecutor(1, thread_name_prefix="host-ceiling")
         self.phases_alone, self.phases_at_once = [], []
+
+    def warm(self):
+        """One untimed step of every engine (pools and lists grown to size),
+        left out of the phase records."""
+        self.alone()
+        self.at_once()
+        self.phases_alone.clear()
+        self.phases_at_once.clear()
 
     @staticmethod
     def _phases(engs, before):
@@ -144,9 +113,9 @@ class HostCeiling:
     def at_once(self):
         before = [e.phase_seconds for e in self._once]
         t0 = time.perf_counter()
-        self._partner.submit(lambda: _timed_step(self._once[1]))
+        other = self._partner.submit(_timed_step, self._once[1])
         mine = _timed_step(self._once[0])
-        other = self._partner.result()
+        other = other.result()  # a failure there is raised here
         wall = time.perf_counter() - t0
         self.phases_at_once.append(self._phases(self._once, before))
         return [mine, other], wall
@@ -157,6 +126,6 @@ class HostCeiling:
                    for a, b in zip(self._alone, self._once))
 
     def close(self):
-        self._partner.close()
+        self._partner.shutdown()
         for e in self._alone + self._once:
             e.close()

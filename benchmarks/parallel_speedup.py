@@ -357,9 +357,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         ceil = HostCeiling(sc.state, sc.physics, sc.dt, split) if split != "none" else None
         if ceil is not None:
             closing.append(ceil)
-            ceil.alone()
-            ceil.at_once()
-            del ceil.phases_alone[:], ceil.phases_at_once[:]  # untimed, as the engines'
+            ceil.warm()  # untimed, as the engines' first step
         c_alone, c_once, c_each = [], [], []
         for eng in engines.values():
             eng.step()

@@ -47,6 +47,8 @@ class TestCeiling:
         n = ring.state.n
         assert c.counts == ([n // 2, n - n // 2] if split == "halves" else [n, n])
         try:
+            c.warm()
+            assert c.phases_alone == [] and c.phases_at_once == []
             for _ in range(3):
                 each, wall = c.alone()
                 assert len(each) == 2 and wall >= sum(each) > 0.0
@@ -67,13 +69,15 @@ class TestCeiling:
             hc.HostCeiling(ring.state, ring.physics, ring.dt, "thirds")
 
 
-def test_a_failing_job_on_the_partner_thread_raises_in_the_caller(hc):
-    p = hc._Partner()
+def test_a_failing_step_on_the_partner_thread_raises_in_the_caller(hc, ring):
+    c = hc.HostCeiling(ring.state, ring.physics, ring.dt)
     try:
-        p.submit(lambda: 1 / 0)
+        step = c._once[1].step
+        c._once[1].step = lambda: 1 / 0
         with pytest.raises(ZeroDivisionError):
-            p.result()
-        p.submit(lambda: 7)  # and the thread goes on serving
-        assert p.result() == 7
+            c.at_once()
+        c._once[1].step = step  # and the thread goes on serving
+        both, wall = c.at_once()
+        assert len(both) == 2 and wall >= max(both) > 0.0
     finally:
-        p.close()
+        c.close()
