@@ -32,24 +32,28 @@ machine while the engine's steps ran (``steal`` in /proc/stat, 10 ms ticks),
 as a share of the machine's CPU time, and ``(steps)`` how many of its steps
 lost any; ``paired unstolen`` is the paired median over the steps in which
 neither this engine nor the sequential one lost a tick.  The host can also
-take a core, or memory bandwidth, without the guest seeing either: before
-every timed step ``host_probe`` runs a register-only loop and a memory-bound
-one on one thread and then on two (and, since 2026-12-04 evening, a
-throughput-bound one), and each case ends with a line giving the probes'
-median 2-thread scaling over the run (about 2: the host gave two threads
-twice the work; about 1: one thread's worth).  ``paired clear`` is the
-paired median over the steps before which every probe found two full cores
-(``host_probe.clear``: all three at least 1.6), both before this engine's
-step and before the sequential engine's, with their count; ``paired
-contended`` is over the other steps.  Which steps count is decided before
-they run, from the probe alone.  The host line also gives the median time
-of a cache line's round trip between two threads (``handoff_ns``), and
-each case's last line splits the paired median by the round trip measured
-just before the 2-thread engine's step (``host_probe.near``: below
-``FAR_NS``, 250 ns; the host switches between about 90 and about 350 ns
-every few minutes, and the pool's events cost far more at the long one),
-apart from the steps whose probe the host paused (a round trip of
-``LATE_NS``, 700 ns, or more: ``host_probe.far``).
+take a core, or memory bandwidth, without the guest seeing either: once a
+round, after the engines' steps and before the ceiling's (below),
+``host_probe`` runs a register-only loop and a memory-bound one on one
+thread and then on two (and, since 2026-12-04 evening, a throughput-bound
+one), and each case ends with a line giving the probes' median 2-thread
+scaling over the run (about 2: the host gave two threads twice the work;
+about 1: one thread's worth).  (Until 2026-12-07 the probe ran just before
+every timed step; a probe just before the 2-thread engine's step slowed
+that step by 4-8 %, in four runs of 200-600 rounds, while the sequential
+engine's step after a probe kept its pace: README, Benchmarks, "The host
+probe after the steps".)  ``paired clear`` is the paired median over the
+steps whose round's probe found two full cores (``host_probe.clear``: all
+three at least 1.6), with their count; ``paired contended`` is over the
+other steps.  Which steps count is decided by the probe alone, not timed
+with the engines.  The host line also gives the median time of a cache
+line's round trip between two threads (``handoff_ns``), and each case's
+last line splits the paired median by the round trip measured in the
+step's round (``host_probe.near``: below ``FAR_NS``, 250 ns; the host
+switches between about 90 and about 350 ns every few minutes, and the
+pool's events cost far more at the long one), apart from the steps whose
+probe the host paused (a round trip of ``LATE_NS``, 700 ns, or more:
+``host_probe.far``).
 The probes are loops of their own, a few ms each; since 2026-12-07 each
 round of steps also measures the host's *ceiling* on the engine's own work
 (``host_ceiling``; ``--ceiling halves|copies|none``, by default halves, or
@@ -370,18 +374,21 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
         # from the machine (steal) while the step ran
         cpu = {k: [] for k in engines}
         stolen = {k: [] for k in engines}
-        # the host's two cores, probed before each step (host_probe): how much of
-        # the run the machine had two cores to give, and which steps ran with
-        # them (the paired median over those steps is reported beside the
-        # paired median over all; the probe runs before the step, so which
-        # steps count does not depend on the engine's own timing)
+        # the host's two cores, probed once a round, after the engines' steps
+        # (host_probe): how much of the run the machine had two cores to give,
+        # and which steps ran with them (the paired median over those steps is
+        # reported beside the paired median over all; the probe is not timed
+        # with the engines, so which steps count does not depend on the
+        # engines' own timing).  Not before each step, as until 2026-12-07: a
+        # probe just before the 2-thread engine's step slowed that step by 4-8 %,
+        # the sequential one's not (README, Benchmarks: "The host probe after
+        # the steps")
         probe = TwoCoreProbe()
         probes = []
         closing.append(probe)
         for r in range(repeats):
             for _ in range(steps):  # the engines take each step in turn
                 for label, eng in engines.items():
-                    probes.append(probe.measure())
                     ph0 = eng.phase_seconds
                     s0 = host_steal()
                     c0 = time.process_time()
@@ -394,6 +401,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                     ph1 = eng.phase_seconds
                     for k, v in phases[label].items():
                         v.append(ph1[k] - ph0[k])
+                probes.extend([probe.measure()] * len(engines))  # one a step of each
                 if ceil is not None:  # its two parts: one after the other, then at once
                     each, _ = ceil.alone()
                     c_alone.append(sum(each))
@@ -409,7 +417,7 @@ def run_case(name, scene, state, n, steps, repeats, locks, bed_code="lammps", be
                    f"at once {sum(c_once[-steps:]) / steps * 1e3:.0f} ms/step"
                    if ceil is not None else ""))
         ref = engines["sequential"].state().sha256()
-        # per engine, per timed step: did the probe just before it find two full cores?
+        # per engine, per timed step: did its round's probe find two full cores?
         clear_at = {k: [clear(p) for p in probes[i::len(engines)]]
                     for i, k in enumerate(engines)}
         # and were its two threads near each other (``host_probe.near``)?
@@ -533,7 +541,8 @@ def print_case(name, res):
     mem = [x[1] for x in pr]
     alu = [x[2] for x in pr]
     two = sum(1 for x in reg if x >= TWO_CORES)
-    print(f"  the host (host_probe, before each step): two threads' rate over one's, "
+    print(f"  the host (host_probe, once a round after the engines' steps): two threads' "
+          f"rate over one's, "
           f"registers median {statistics.median(reg):.2f} ({min(reg):.2f}-{max(reg):.2f}; "
           f"two cores in {two} of {len(pr)} probes), memory median "
           f"{statistics.median(mem):.2f} ({min(mem):.2f}-{max(mem):.2f}), throughput median "
@@ -603,14 +612,14 @@ def main():
                      "two threads of this work less than the target"
                      if c["speedup_best"] < TARGET else ""))
         clr = _best_over(res, "speedup_paired_clear", "clear_steps")
-        print(f"    over the steps the host left two full cores (host_probe.clear before "
-              f"both engines' steps): {clr[0]} paired median "
+        print(f"    over the steps the host left two full cores (host_probe.clear in "
+              f"their round): {clr[0]} paired median "
               f"{clr[1]['speedup_paired_clear']:.2f}x over {clr[1]['clear_steps']} of "
               f"{res['steps'] * res['repeats']} steps ({clr[1]['speedup_paired_clear'] / TARGET:.2f} "
               f"of the target); over the others {clr[1]['speedup_paired_contended']:.2f}x")
         nr = _best_over(res, "speedup_paired_near", "near_steps")
         n_all = res["steps"] * res["repeats"]
-        print(f"    by the round trip between the threads just before the step "
+        print(f"    by the round trip between the threads in the step's round "
               f"(host_probe.near, below {FAR_NS:.0f} ns): {nr[0]} paired median "
               f"{nr[1]['speedup_paired_near']:.2f}x over {nr[1]['near_steps']} of {n_all} "
               f"steps; {nr[1]['speedup_paired_far']:.2f}x over the {nr[1]['far_steps']} "

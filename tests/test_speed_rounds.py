@@ -1,0 +1,55 @@
+"""The speed benchmark's rounds (``benchmarks/parallel_speedup.py``,
+``run_case``): the engines take each step in turn, and the host probe runs
+once a round, after the engines' steps, never just before one (a probe just
+before the 2-thread engine's step slowed that step by 4-8 %: README,
+Benchmarks, "The host probe after the steps")."""
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "parallel_speedup.py"
+
+
+@pytest.fixture(scope="module")
+def ps():
+    # run as a script the benchmark has its own folder on the path (host_probe)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.syspath_prepend(str(BENCH.parent))
+        spec = importlib.util.spec_from_file_location("parallel_speedup_under_test", BENCH)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_probe_runs_once_a_round_after_the_engines_steps(ps, monkeypatch):
+    calls = []  # ("step", threads) and ("probe",), in order
+
+    class Probe:  # the real probe's answer shape: (chain, gather, alu, handoff ns)
+        def measure(self):
+            calls.append(("probe",))
+            return (2.0, 2.0, 2.0, 100.0)
+
+        def close(self):
+            pass
+
+    step = ps.Engine.step
+
+    def counted(self, *args, **kwargs):
+        calls.append(("step", self.threads))
+        return step(self, *args, **kwargs)
+
+    monkeypatch.setattr(ps, "TwoCoreProbe", Probe)
+    monkeypatch.setattr(ps.Engine, "step", counted)
+    steps, repeats = 3, 2
+    res = ps.run_case("ring", "ring", "early", 1500, steps, repeats, ps.parse_locks("pool:4"),
+                      ceiling="none")
+    assert all(r["identical"] for r in res["runs"].values())
+    timed = calls[[k for k, c in enumerate(calls) if c[0] == "probe"][0] - 2:]
+    # after the untimed first step of each engine: rounds of (sequential step,
+    # 2-thread step, probe)
+    assert timed == [("step", 1), ("step", 2), ("probe",)] * (steps * repeats)
+    # one probe record a step of each engine, the round's
+    pr = res["host_two_core_probes"]
+    assert len(pr) == 2 * steps * repeats
+    assert pr[0::2] == pr[1::2]
