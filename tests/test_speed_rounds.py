@@ -22,7 +22,7 @@ def ps():
     return mod
 
 
-def test_the_probe_runs_once_a_round_after_the_engines_steps(ps, monkeypatch):
+def test_the_probe_runs_once_a_round_after_the_engines_steps(ps, monkeypatch, capsys):
     calls = []  # ("step", threads) and ("probe",), in order
 
     class Probe:  # the real probe's answer shape: (chain, gather, alu, handoff ns)
@@ -53,3 +53,6 @@ def test_the_probe_runs_once_a_round_after_the_engines_steps(ps, monkeypatch):
     pr = res["host_two_core_probes"]
     assert len(pr) == 2 * steps * repeats
     assert pr[0::2] == pr[1::2]
+    # and the report counts each round's probe once
+    ps.print_case("ring", res)
+    assert f"two cores in {steps * repeats} of {steps * repeats} probes" in capsys.readouterr().out
