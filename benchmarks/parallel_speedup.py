@@ -40,7 +40,7 @@ one), and each case ends with a line giving the probes' median 2-thread
 scaling over the run (about 2: the host gave two threads twice the work;
 about 1: one thread's worth).  (Until 2026-12-07 the probe ran just before
 every timed step; a probe just before the 2-thread engine's step slowed
-that step by 4-8 %, in four runs of 200-600 rounds, while the sequential
+that step by 4-8 % in four of five runs of 200-600 rounds, while the sequential
 engine's step after a probe kept its pace: README, Benchmarks, "The host
 probe after the steps".)  ``paired clear`` is the paired median over the
 steps whose round's probe found two full cores (``host_probe.clear``: all
