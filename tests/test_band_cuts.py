@@ -1,23 +1,12 @@
 """The replay benchmark's domain cuts and traced costs
 (``benchmarks/band_bound.py``: ``cut_domains``, ``in_slots``)."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "band_bound.py"
-
 
 @pytest.fixture(scope="module")
-def bb():
-    # run as a script the benchmark has its own folder on the path (host_probe)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.syspath_prepend(str(BENCH.parent))
-        spec = importlib.util.spec_from_file_location("band_bound_under_test", BENCH)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    return mod
+def bb(load_benchmark):
+    return load_benchmark("band_bound")
 
 
 def random_events(rng, n, e):

@@ -2,23 +2,15 @@
 sequential engines on two parts of a state, one after the other and at
 once.  What it times must be the same work both ways, and its halves must be
 the state cut in two."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from lockgraph import scenarios
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "host_ceiling.py"
-
 
 @pytest.fixture(scope="module")
-def hc():
-    spec = importlib.util.spec_from_file_location("host_ceiling_under_test", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def hc(load_benchmark):
+    return load_benchmark("host_ceiling")
 
 
 @pytest.fixture(scope="module")

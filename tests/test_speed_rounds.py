@@ -3,23 +3,12 @@
 once a round, after the engines' steps, never just before one (a probe just
 before the 2-thread engine's step slowed that step by 4-8 %: README,
 Benchmarks, "The host probe after the steps")."""
-import importlib.util
-from pathlib import Path
-
 import pytest
-
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "parallel_speedup.py"
 
 
 @pytest.fixture(scope="module")
-def ps():
-    # run as a script the benchmark has its own folder on the path (host_probe)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.syspath_prepend(str(BENCH.parent))
-        spec = importlib.util.spec_from_file_location("parallel_speedup_under_test", BENCH)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    return mod
+def ps(load_benchmark):
+    return load_benchmark("parallel_speedup")
 
 
 def test_the_probe_runs_once_a_round_after_the_engines_steps(ps, monkeypatch, capsys):
