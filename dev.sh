@@ -5,9 +5,10 @@
 #                     campaign, under 10 minutes) in report/index.html; ARGS go to
 #                     'lockgraph report' (e.g. --full, --scenes ring, --out DIR)
 #   ./dev.sh test     set up, then run the test and validation suites
-#   ./dev.sh bench [throughput|parallel|ceiling|band|handoff|tables|rebound|dem|marble|deep_marble] [ARGS]
+#   ./dev.sh bench [throughput|parallel|target|ceiling|band|handoff|tables|rebound|dem|marble|deep_marble] [ARGS]
 #                     a benchmark: one-core throughput and memory (default),
-#                     2-thread speedup, its ceiling on this machine (two
+#                     2-thread speedup, issue #3's target run after run on
+#                     both scenes (tallied), its ceiling on this machine (two
 #                     halves at once), a band split's ideal schedule (and K domains
 #                     shared by the threads) by replay, what clocks and locks
 #                     cost two event loops, the paper's tables by replay, speed
@@ -83,10 +84,11 @@ case "$cmd" in
     bench)
         setup_python
         which="throughput"
-        case "${1:-}" in throughput|parallel|ceiling|band|handoff|tables|rebound|dem|marble|deep_marble) which="$1"; shift ;; esac
+        case "${1:-}" in throughput|parallel|target|ceiling|band|handoff|tables|rebound|dem|marble|deep_marble) which="$1"; shift ;; esac
         case "$which" in
             throughput) exec "$PY" benchmarks/throughput.py "$@" ;;
             parallel) exec "$PY" benchmarks/parallel_speedup.py "$@" ;;
+            target) exec "$PY" benchmarks/target_runs.py "$@" ;;
             ceiling) exec "$PY" benchmarks/event_ceiling.py "$@" ;;
             band) exec "$PY" benchmarks/band_bound.py "$@" ;;
             handoff) exec "$PY" benchmarks/clock_handoff.py "$@" ;;
