@@ -9,7 +9,7 @@ import pytest
 def row(case, best, ceiling, over=1.0, identical=True):
     return {"file": f"{case}.json", "case": case, "engine": "pool", "n": 1, "best": best,
             "paired": best, "ceiling_best": ceiling, "ceiling_paired": ceiling,
-            "over_ceiling": over, "identical": identical, "repairs": 0}
+            "over_ceiling": over, "identical": identical}
 
 
 def test_reached_counts_to_two_decimals(load_benchmark):
